@@ -1,0 +1,389 @@
+//! Predicates: functions from a state (and its waypoint index) to a robustness
+//! value, with their gradient.
+//!
+//! A formula refers to predicates by name; a [`crate::SpecBuilder`] binds each name to
+//! a [`Predicate`]. This module ships the common ones: goal regions ([`Ball`]),
+//! half-spaces ([`Halfspace`]), axis-aligned box obstacles ([`AvoidBoxes`]),
+//! time-triggered signals ([`AfterStep`]) and closures ([`FnPredicate`]).
+
+use std::fmt;
+
+/// A state predicate with quantitative semantics: positive means satisfied.
+pub trait Predicate: Send + Sync {
+    /// The robustness of this predicate on `state`, the path's state at step `t`.
+    fn value(&self, t: usize, state: &[f64]) -> f64;
+
+    /// The robustness, adding `scale · ∂value/∂state` into `grad` (same length as
+    /// `state`). Where the function is not differentiable, any subgradient.
+    fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64;
+
+    /// The number of state dimensions this predicate reads (it reads
+    /// `state[..required_dim()]`); checked when a spec is built.
+    fn required_dim(&self) -> usize;
+}
+
+impl<P: Predicate + ?Sized> Predicate for Box<P> {
+    fn value(&self, t: usize, state: &[f64]) -> f64 {
+        (**self).value(t, state)
+    }
+    fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
+        (**self).value_and_grad(t, state, scale, grad)
+    }
+    fn required_dim(&self) -> usize {
+        (**self).required_dim()
+    }
+}
+
+impl<P: Predicate + ?Sized> Predicate for std::sync::Arc<P> {
+    fn value(&self, t: usize, state: &[f64]) -> f64 {
+        (**self).value(t, state)
+    }
+    fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
+        (**self).value_and_grad(t, state, scale, grad)
+    }
+    fn required_dim(&self) -> usize {
+        (**self).required_dim()
+    }
+}
+
+/// A goal region: `radius − ‖state[offset..offset+d] − center‖` (the paper's reach
+/// predicate, App. D). At the centre the gradient is taken as zero.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ball {
+    /// Centre, one coordinate per dimension read.
+    pub center: Vec<f64>,
+    /// Radius.
+    pub radius: f64,
+    /// First state dimension read.
+    pub offset: usize,
+}
+
+impl Ball {
+    /// A ball over the first `center.len()` state dimensions.
+    pub fn new(center: impl Into<Vec<f64>>, radius: f64) -> Self {
+        Self {
+            center: center.into(),
+            radius,
+            offset: 0,
+        }
+    }
+}
+
+impl Predicate for Ball {
+    fn value(&self, _t: usize, state: &[f64]) -> f64 {
+        let p = &state[self.offset..self.offset + self.center.len()];
+        let d2: f64 = p
+            .iter()
+            .zip(&self.center)
+            .map(|(x, c)| (x - c) * (x - c))
+            .sum();
+        self.radius - d2.sqrt()
+    }
+
+    fn value_and_grad(&self, _t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
+        let k = self.center.len();
+        let p = &state[self.offset..self.offset + k];
+        let d = p
+            .iter()
+            .zip(&self.center)
+            .map(|(x, c)| (x - c) * (x - c))
+            .sum::<f64>()
+            .sqrt();
+        if d > 0.0 {
+            let g = &mut grad[self.offset..self.offset + k];
+            for ((gi, x), c) in g.iter_mut().zip(p).zip(&self.center) {
+                *gi -= scale * (x - c) / d;
+            }
+        }
+        self.radius - d
+    }
+
+    fn required_dim(&self) -> usize {
+        self.offset + self.center.len()
+    }
+}
+
+/// A half-space `normal · state[..d] − bound ≥ 0`, robustness `normal · x − bound`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Halfspace {
+    /// Coefficients, one per state dimension read.
+    pub normal: Vec<f64>,
+    /// Right-hand side.
+    pub bound: f64,
+}
+
+impl Predicate for Halfspace {
+    fn value(&self, _t: usize, state: &[f64]) -> f64 {
+        self.normal
+            .iter()
+            .zip(state)
+            .map(|(a, x)| a * x)
+            .sum::<f64>()
+            - self.bound
+    }
+
+    fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
+        for (g, a) in grad.iter_mut().zip(&self.normal) {
+            *g += scale * a;
+        }
+        self.value(t, state)
+    }
+
+    fn required_dim(&self) -> usize {
+        self.normal.len()
+    }
+}
+
+/// An axis-aligned box: centre and half-sizes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AxisBox {
+    /// Centre.
+    pub center: Vec<f64>,
+    /// Half the size along each axis.
+    pub half: Vec<f64>,
+}
+
+impl AxisBox {
+    /// Signed distance from `p` to the box (negative inside) and, if `grad` is given,
+    /// its gradient written into it.
+    pub fn signed_distance(&self, p: &[f64], grad: Option<&mut [f64]>) -> f64 {
+        let k = self.center.len();
+        let mut outside2 = 0.0;
+        let mut inside_max = f64::NEG_INFINITY;
+        let mut inside_axis = 0;
+        for i in 0..k {
+            let q = (p[i] - self.center[i]).abs() - self.half[i];
+            if q > 0.0 {
+                outside2 += q * q;
+            }
+            if q > inside_max {
+                inside_max = q;
+                inside_axis = i;
+            }
+        }
+        let outside = outside2.sqrt();
+        let sd = if outside > 0.0 { outside } else { inside_max };
+        if let Some(g) = grad {
+            for i in 0..k {
+                let dir = if p[i] >= self.center[i] { 1.0 } else { -1.0 };
+                let q = (p[i] - self.center[i]).abs() - self.half[i];
+                g[i] = if outside > 0.0 {
+                    if q > 0.0 { dir * q / outside } else { 0.0 }
+                } else if i == inside_axis {
+                    dir
+                } else {
+                    0.0
+                };
+            }
+        }
+        sd
+    }
+}
+
+/// Staying out of a set of axis-aligned boxes: robustness is the signed distance to
+/// the nearest box minus a `margin` (e.g. the robot's radius), so positive means
+/// clear of every box by more than the margin. Reads the first `d` dimensions, `d`
+/// the boxes' dimension.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AvoidBoxes {
+    /// The obstacles; all of one dimension.
+    pub boxes: Vec<AxisBox>,
+    /// Clearance subtracted from the distance.
+    pub margin: f64,
+}
+
+impl AvoidBoxes {
+    /// Squares/cubes of half-size `half` centred at `centers`.
+    pub fn cubes(centers: &[Vec<f64>], half: f64, margin: f64) -> Self {
+        let boxes = centers
+            .iter()
+            .map(|c| AxisBox {
+                center: c.clone(),
+                half: vec![half; c.len()],
+            })
+            .collect();
+        Self { boxes, margin }
+    }
+
+    fn nearest(&self, p: &[f64]) -> (usize, f64) {
+        let mut best = (0, f64::INFINITY);
+        for (i, b) in self.boxes.iter().enumerate() {
+            let d = b.signed_distance(p, None);
+            if d < best.1 {
+                best = (i, d);
+            }
+        }
+        best
+    }
+}
+
+impl Predicate for AvoidBoxes {
+    fn value(&self, _t: usize, state: &[f64]) -> f64 {
+        self.nearest(state).1 - self.margin
+    }
+
+    fn value_and_grad(&self, _t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
+        let (i, d) = self.nearest(state);
+        let k = self.required_dim();
+        let mut g = [0.0; 8];
+        let mut gv;
+        let gs: &mut [f64] = if k <= 8 {
+            &mut g[..k]
+        } else {
+            gv = vec![0.0; k];
+            &mut gv
+        };
+        if let Some(b) = self.boxes.get(i) {
+            b.signed_distance(state, Some(gs));
+        }
+        for (o, gi) in grad.iter_mut().zip(gs.iter()) {
+            *o += scale * gi;
+        }
+        d - self.margin
+    }
+
+    fn required_dim(&self) -> usize {
+        self.boxes.first().map_or(0, |b| b.center.len())
+    }
+}
+
+/// A signal of time alone: `−1` before waypoint `step`, `+1` from it on. The paper's
+/// Signal task uses one as its counter ("false until the 10th waypoint", App. G).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AfterStep {
+    /// First step at which the predicate holds.
+    pub step: usize,
+}
+
+impl Predicate for AfterStep {
+    fn value(&self, t: usize, _state: &[f64]) -> f64 {
+        if t >= self.step { 1.0 } else { -1.0 }
+    }
+
+    fn value_and_grad(&self, t: usize, state: &[f64], _scale: f64, _grad: &mut [f64]) -> f64 {
+        self.value(t, state)
+    }
+
+    fn required_dim(&self) -> usize {
+        0
+    }
+}
+
+/// One state dimension compared with a number: `sign · (state[index] − threshold)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct SignalCompare {
+    pub index: usize,
+    pub sign: f64,
+    pub threshold: f64,
+}
+
+impl Predicate for SignalCompare {
+    fn value(&self, _t: usize, state: &[f64]) -> f64 {
+        self.sign * (state[self.index] - self.threshold)
+    }
+
+    fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
+        grad[self.index] += scale * self.sign;
+        self.value(t, state)
+    }
+
+    fn required_dim(&self) -> usize {
+        self.index + 1
+    }
+}
+
+/// A bound predicate compared with a number: `sign · (inner − threshold)`.
+pub(crate) struct Shifted<P> {
+    pub inner: P,
+    pub sign: f64,
+    pub threshold: f64,
+}
+
+impl<P: Predicate> Predicate for Shifted<P> {
+    fn value(&self, t: usize, state: &[f64]) -> f64 {
+        self.sign * (self.inner.value(t, state) - self.threshold)
+    }
+
+    fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
+        self.sign * (self.inner.value_and_grad(t, state, scale * self.sign, grad) - self.threshold)
+    }
+
+    fn required_dim(&self) -> usize {
+        self.inner.required_dim()
+    }
+}
+
+type ValueFn = dyn Fn(usize, &[f64]) -> f64 + Send + Sync;
+type GradFn = dyn Fn(usize, &[f64], &mut [f64]) + Send + Sync;
+
+/// A predicate from closures: a value function and, optionally, its gradient
+/// (without one, central finite differences with step `1e-6` are used).
+pub struct FnPredicate {
+    value: Box<ValueFn>,
+    grad: Option<Box<GradFn>>,
+    dim: usize,
+}
+
+impl FnPredicate {
+    /// A predicate reading `dim` state dimensions, differentiated numerically.
+    pub fn new(dim: usize, value: impl Fn(usize, &[f64]) -> f64 + Send + Sync + 'static) -> Self {
+        Self {
+            value: Box::new(value),
+            grad: None,
+            dim,
+        }
+    }
+
+    /// Supplies the exact gradient: `grad(t, state, out)` writes `∂value/∂state` into `out`.
+    pub fn with_gradient(
+        mut self,
+        grad: impl Fn(usize, &[f64], &mut [f64]) + Send + Sync + 'static,
+    ) -> Self {
+        self.grad = Some(Box::new(grad));
+        self
+    }
+}
+
+impl fmt::Debug for FnPredicate {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("FnPredicate")
+            .field("dim", &self.dim)
+            .field("exact_gradient", &self.grad.is_some())
+            .finish()
+    }
+}
+
+impl Predicate for FnPredicate {
+    fn value(&self, t: usize, state: &[f64]) -> f64 {
+        (self.value)(t, state)
+    }
+
+    fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
+        let v = (self.value)(t, state);
+        let mut g = vec![0.0; state.len()];
+        match &self.grad {
+            Some(gf) => gf(t, state, &mut g),
+            None => {
+                const H: f64 = 1e-6;
+                let mut s = state.to_vec();
+                for i in 0..self.dim.min(state.len()) {
+                    let x = s[i];
+                    s[i] = x + H;
+                    let up = (self.value)(t, &s);
+                    s[i] = x - H;
+                    let down = (self.value)(t, &s);
+                    s[i] = x;
+                    g[i] = (up - down) / (2.0 * H);
+                }
+            }
+        }
+        for (o, gi) in grad.iter_mut().zip(&g) {
+            *o += scale * gi;
+        }
+        v
+    }
+
+    fn required_dim(&self) -> usize {
+        self.dim
+    }
+}
