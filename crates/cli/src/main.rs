@@ -1,1 +1,39 @@
-fn main() {}
+//! `schrl`: the command line over the schrl libraries.
+//!
+//! Each subcommand lives in its own module under `commands/`; this file only parses
+//! arguments, dispatches, and turns errors into a message on stderr and a non-zero
+//! exit code (never a panic).
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod commands;
+
+/// Teach robots tasks written as Signal Temporal Logic specifications.
+#[derive(Parser, Debug)]
+#[command(name = "schrl", version, about, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Robustness of a spec on a trace (CSV: header names the signals, one row per step).
+    Robustness(commands::robustness::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Robustness(args) => commands::robustness::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

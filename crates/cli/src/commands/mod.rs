@@ -1,0 +1,4 @@
+//! One module per subcommand.
+
+pub mod robustness;
+pub mod spec_text;
