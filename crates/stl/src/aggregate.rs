@@ -7,6 +7,9 @@
 //! are O(T) too: the gradient reaching `v_i` is a sum over the windows containing
 //! `i`, and those windows form another sliding range, aggregated the same way.
 
+// Index loops mirror the formulas they implement.
+#![allow(clippy::needless_range_loop)]
+
 use crate::semantics::Smoothing;
 
 /// Direction of an aggregation.
@@ -31,9 +34,7 @@ impl Agg {
         match smoothing {
             Smoothing::Hard => Agg::Hard(dir),
             Smoothing::Soft { alpha } => Agg::Soft { beta: sign * alpha },
-            Smoothing::LogSumExp { temperature } => Agg::Lse {
-                beta: sign / temperature,
-            },
+            Smoothing::LogSumExp { temperature } => Agg::Lse { beta: sign / temperature },
         }
     }
 
@@ -57,19 +58,11 @@ pub(crate) struct Acc {
 }
 
 impl Acc {
-    const EMPTY: Acc = Acc {
-        m: f64::NEG_INFINITY,
-        s: 0.0,
-        sv: 0.0,
-    };
+    const EMPTY: Acc = Acc { m: f64::NEG_INFINITY, s: 0.0, sv: 0.0 };
 
     #[inline]
     fn lift(beta: f64, v: f64) -> Acc {
-        Acc {
-            m: beta * v,
-            s: 1.0,
-            sv: v,
-        }
+        Acc { m: beta * v, s: 1.0, sv: v }
     }
 
     #[inline]
@@ -82,18 +75,10 @@ impl Acc {
         }
         if a.m >= b.m {
             let k = (b.m - a.m).exp();
-            Acc {
-                m: a.m,
-                s: a.s + k * b.s,
-                sv: a.sv + k * b.sv,
-            }
+            Acc { m: a.m, s: a.s + k * b.s, sv: a.sv + k * b.sv }
         } else {
             let k = (a.m - b.m).exp();
-            Acc {
-                m: b.m,
-                s: k * a.s + b.s,
-                sv: k * a.sv + b.sv,
-            }
+            Acc { m: b.m, s: k * a.s + b.s, sv: k * a.sv + b.sv }
         }
     }
 
@@ -123,19 +108,11 @@ pub(crate) struct BAcc {
 }
 
 impl BAcc {
-    const EMPTY: BAcc = BAcc {
-        m: f64::NEG_INFINITY,
-        a: 0.0,
-        b: 0.0,
-    };
+    const EMPTY: BAcc = BAcc { m: f64::NEG_INFINITY, a: 0.0, b: 0.0 };
 
     #[inline]
     fn lift(log_weight: f64, g: f64, out: f64) -> BAcc {
-        BAcc {
-            m: -log_weight,
-            a: g,
-            b: g * out,
-        }
+        BAcc { m: -log_weight, a: g, b: g * out }
     }
 
     #[inline]
@@ -148,18 +125,10 @@ impl BAcc {
         }
         if x.m >= y.m {
             let k = (y.m - x.m).exp();
-            BAcc {
-                m: x.m,
-                a: x.a + k * y.a,
-                b: x.b + k * y.b,
-            }
+            BAcc { m: x.m, a: x.a + k * y.a, b: x.b + k * y.b }
         } else {
             let k = (x.m - y.m).exp();
-            BAcc {
-                m: y.m,
-                a: k * x.a + y.a,
-                b: k * x.b + y.b,
-            }
+            BAcc { m: y.m, a: k * x.a + y.a, b: k * x.b + y.b }
         }
     }
 
@@ -173,9 +142,7 @@ impl BAcc {
             return 0.0;
         }
         match agg {
-            Agg::Soft { beta } => {
-                (beta * v + self.m).exp() * (self.a + beta * (v * self.a - self.b))
-            }
+            Agg::Soft { beta } => (beta * v + self.m).exp() * (self.a + beta * (v * self.a - self.b)),
             Agg::Lse { beta } => (beta * v + self.m).exp() * self.a,
             Agg::Hard(_) => unreachable!("hard aggregation does not use BAcc"),
         }
@@ -239,11 +206,7 @@ fn query_blocks<M: Copy>(
     hi: usize,
     combine: impl Fn(M, M) -> M,
 ) -> M {
-    if lo / w == hi / w {
-        if lo % w == 0 { pre[hi] } else { suf[lo] }
-    } else {
-        combine(suf[lo], pre[hi])
-    }
+    if lo / w == hi / w { if lo % w == 0 { pre[hi] } else { suf[lo] } } else { combine(suf[lo], pre[hi]) }
 }
 
 /// The window of a temporal operator with interval `[a, b]` (`b = None`: to the end)
@@ -273,12 +236,18 @@ fn window_len(a: usize, b: Option<usize>, n: usize) -> usize {
 
 /// Aggregates the operand values `v`.
 pub(crate) fn reduce(agg: Agg, v: &[f64]) -> f64 {
+    reduce_logw(agg, v).0
+}
+
+/// Aggregates `v`, also returning the log-weight `L = ln Σ e^{βv}` that
+/// [`reduce_backward`] needs (0 in hard mode).
+pub(crate) fn reduce_logw(agg: Agg, v: &[f64]) -> (f64, f64) {
     match agg {
-        Agg::Hard(dir) => v[arg_best(dir, v)],
-        Agg::Soft { beta } | Agg::Lse { beta } => v
-            .iter()
-            .fold(Acc::EMPTY, |acc, &x| Acc::combine(acc, Acc::lift(beta, x)))
-            .value(agg),
+        Agg::Hard(dir) => (v[arg_best(dir, v)], 0.0),
+        Agg::Soft { beta } | Agg::Lse { beta } => {
+            let acc = v.iter().fold(Acc::EMPTY, |acc, &x| Acc::combine(acc, Acc::lift(beta, x)));
+            (acc.value(agg), acc.log_weight())
+        }
     }
 }
 
@@ -293,15 +262,14 @@ fn arg_best(dir: Dir, v: &[f64]) -> usize {
     best
 }
 
-/// Adds `g · ∂reduce(v)/∂v_i` to `gv[i]`; `out` is the forward result.
-pub(crate) fn reduce_backward(agg: Agg, v: &[f64], out: f64, g: f64, gv: &mut [f64]) {
+/// Adds `g · ∂reduce(v)/∂v_i` to `gv[i]`; `out` and `logw` come from
+/// [`reduce_logw`], so each weight `e^{βv_i − L}` costs one `exp`.
+pub(crate) fn reduce_backward(agg: Agg, v: &[f64], out: f64, logw: f64, g: f64, gv: &mut [f64]) {
     match agg {
         Agg::Hard(dir) => gv[arg_best(dir, v)] += g,
         Agg::Soft { beta } => {
-            let m = v.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(beta * x));
-            let s: f64 = v.iter().map(|&x| (beta * x - m).exp()).sum();
             for (gi, &x) in gv.iter_mut().zip(v) {
-                let w = (beta * x - m).exp() / s;
+                let w = (beta * x - logw).exp();
                 *gi += g * w * (1.0 + beta * (x - out));
             }
         }
@@ -317,13 +285,14 @@ pub(crate) fn reduce_backward(agg: Agg, v: &[f64], out: f64, g: f64, gv: &mut [f
 // Sliding windows (eventually = max, globally = min)
 // ---------------------------------------------------------------------------
 
-/// `out[t] = agg over x[window(t)]` for every `t`.
+/// `out[t] = agg over x[window(t)]` for every `t`; smooth modes also write each
+/// window's log-weight into `logw` for the backward pass.
 pub(crate) fn window_forward(
     agg: Agg,
     x: &[f64],
-    a: usize,
-    b: Option<usize>,
+    (a, b): (usize, Option<usize>),
     out: &mut [f64],
+    logw: &mut [f64],
     sc: &mut Scratch,
 ) {
     let n = x.len();
@@ -335,17 +304,21 @@ pub(crate) fn window_forward(
             soft_window_accs(beta, x, a, b, sc);
             for t in 0..n {
                 out[t] = sc.acc[t].value(agg);
+                logw[t] = sc.acc[t].log_weight();
             }
         }
     }
 }
 
-/// Adds the gradient of [`window_forward`] with upstream `gout` into `gx`.
+/// Adds the gradient of [`window_forward`] with upstream `gout` into `gx`; `out` and
+/// `logw` are what the forward pass wrote.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn window_backward(
     agg: Agg,
     x: &[f64],
-    a: usize,
-    b: Option<usize>,
+    (a, b): (usize, Option<usize>),
+    out: &[f64],
+    logw: &[f64],
     gout: &[f64],
     gx: &mut [f64],
     sc: &mut Scratch,
@@ -355,20 +328,10 @@ pub(crate) fn window_backward(
         Agg::Hard(dir) => {
             hard_window_argbest(dir, x, a, b, sc, |t, j| gx[j] += gout[t]);
         }
-        Agg::Soft { beta } | Agg::Lse { beta } => {
-            soft_window_accs(beta, x, a, b, sc);
+        Agg::Soft { .. } | Agg::Lse { .. } => {
             let w = window_len(a, b, n);
-            let accs = std::mem::take(&mut sc.acc);
-            let item = |t: usize| BAcc::lift(accs[t].log_weight(), gout[t], accs[t].value(agg));
-            build_blocks(
-                item,
-                n,
-                w,
-                BAcc::EMPTY,
-                BAcc::combine,
-                &mut sc.bpre,
-                &mut sc.bsuf,
-            );
+            let item = |t: usize| BAcc::lift(logw[t], gout[t], out[t]);
+            build_blocks(item, n, w, BAcc::EMPTY, BAcc::combine, &mut sc.bpre, &mut sc.bsuf);
             // For i < n−1 the windows containing i are t ∈ [i−b, i−a]: a sliding range.
             for (i, gxi) in gx.iter_mut().enumerate().take(n - 1) {
                 if i < a {
@@ -389,7 +352,6 @@ pub(crate) fn window_backward(
             };
             let q = (lo..n).map(item).fold(BAcc::EMPTY, BAcc::combine);
             gx[n - 1] += q.grad(agg, x[n - 1]);
-            sc.acc = accs;
         }
     }
 }
@@ -429,20 +391,11 @@ fn hard_window_argbest(
 fn soft_window_accs(beta: f64, x: &[f64], a: usize, b: Option<usize>, sc: &mut Scratch) {
     let n = x.len();
     let w = window_len(a, b, n);
-    build_blocks(
-        |i| Acc::lift(beta, x[i]),
-        n,
-        w,
-        Acc::EMPTY,
-        Acc::combine,
-        &mut sc.pre,
-        &mut sc.suf,
-    );
+    build_blocks(|i| Acc::lift(beta, x[i]), n, w, Acc::EMPTY, Acc::combine, &mut sc.pre, &mut sc.suf);
     sc.acc.clear();
     for t in 0..n {
         let (lo, hi) = window(t, a, b, n);
-        sc.acc
-            .push(query_blocks(&sc.pre, &sc.suf, w, lo, hi, Acc::combine));
+        sc.acc.push(query_blocks(&sc.pre, &sc.suf, w, lo, hi, Acc::combine));
     }
 }
 
@@ -470,7 +423,7 @@ pub(crate) fn until_forward(
             // recursion V(u) = max(ψ_u, min(φ_u, V(u+1))), V(n−1) = ψ_{n−1}.
             let mut v = std::mem::take(&mut sc.terms);
             until_v(phi, psi, &mut v);
-            window_forward(Agg::Hard(Dir::Max), psi, a, b, out, sc);
+            window_forward(Agg::Hard(Dir::Max), psi, (a, b), out, &mut [], sc);
             for (t, o) in out.iter_mut().enumerate() {
                 let (lo, _) = window(t, a, b, n);
                 *o = o.min(v[lo]);
@@ -500,13 +453,7 @@ fn until_v(phi: &[f64], psi: &[f64], v: &mut Vec<f64>) {
 }
 
 /// Fills `sc.terms` (and `sc.tacc`) with the inner terms `min(ψ_k, φ_lo..φ_{k−1})`.
-fn soft_until_terms(
-    inner: Agg,
-    phi: &[f64],
-    psi: &[f64],
-    (lo, hi): (usize, usize),
-    sc: &mut Scratch,
-) {
+fn soft_until_terms(inner: Agg, phi: &[f64], psi: &[f64], (lo, hi): (usize, usize), sc: &mut Scratch) {
     let beta = match inner {
         Agg::Soft { beta } | Agg::Lse { beta } => beta,
         Agg::Hard(_) => unreachable!(),
@@ -544,7 +491,7 @@ pub(crate) fn until_backward(
             let mut fpsi = std::mem::take(&mut sc.vwin);
             fpsi.clear();
             fpsi.resize(n, 0.0);
-            window_forward(Agg::Hard(Dir::Max), psi, a, b, &mut fpsi, sc);
+            window_forward(Agg::Hard(Dir::Max), psi, (a, b), &mut fpsi, &mut [], sc);
             // Route each t to the window max of ψ or to V(lo); ties go to the window.
             let mut gv = std::mem::take(&mut sc.gterm);
             gv.clear();
@@ -558,15 +505,13 @@ pub(crate) fn until_backward(
                     gv[lo] += gout[t];
                 }
             }
-            window_backward(Agg::Hard(Dir::Max), psi, a, b, &gwin, gpsi, sc);
+            window_backward(Agg::Hard(Dir::Max), psi, (a, b), &[], &[], &gwin, gpsi, sc);
             for u in 0..n {
                 let g = gv[u];
                 if g == 0.0 {
                     continue;
                 }
-                if u == n - 1 {
-                    gpsi[u] += g;
-                } else if psi[u] >= phi[u].min(v[u + 1]) {
+                if u == n - 1 || psi[u] >= phi[u].min(v[u + 1]) {
                     gpsi[u] += g;
                 } else if phi[u] <= v[u + 1] {
                     gphi[u] += g;
@@ -590,7 +535,8 @@ pub(crate) fn until_backward(
                 let mut gterm = std::mem::take(&mut sc.gterm);
                 gterm.clear();
                 gterm.resize(sc.terms.len(), 0.0);
-                reduce_backward(outer, &sc.terms, out[t], gout[t], &mut gterm);
+                let (_, logw) = reduce_logw(outer, &sc.terms);
+                reduce_backward(outer, &sc.terms, out[t], logw, gout[t], &mut gterm);
                 // ψ_k only enters term k.
                 for (i, k) in (lo..=hi).enumerate() {
                     let q = BAcc::lift(sc.tacc[i].log_weight(), gterm[i], sc.terms[i]);
@@ -600,10 +546,7 @@ pub(crate) fn until_backward(
                 let mut q = BAcc::EMPTY;
                 for k in (lo + 1..=hi).rev() {
                     let i = k - lo;
-                    q = BAcc::combine(
-                        q,
-                        BAcc::lift(sc.tacc[i].log_weight(), gterm[i], sc.terms[i]),
-                    );
+                    q = BAcc::combine(q, BAcc::lift(sc.tacc[i].log_weight(), gterm[i], sc.terms[i]));
                     gphi[k - 1] += q.grad(inner, phi[k - 1]);
                 }
                 sc.gterm = gterm;
@@ -627,9 +570,7 @@ mod tests {
 
     #[test]
     fn windows_match_naive_in_every_mode() {
-        let x: Vec<f64> = (0..37)
-            .map(|i| ((i * 7919) % 23) as f64 * 0.37 - 3.0)
-            .collect();
+        let x: Vec<f64> = (0..37).map(|i| ((i * 7919) % 23) as f64 * 0.37 - 3.0).collect();
         let aggs = [
             Agg::Hard(Dir::Max),
             Agg::Hard(Dir::Min),
@@ -640,16 +581,10 @@ mod tests {
         ];
         let mut sc = Scratch::default();
         for agg in aggs {
-            for (a, b) in [
-                (0, Some(0)),
-                (0, Some(3)),
-                (2, Some(9)),
-                (5, None),
-                (0, None),
-                (30, Some(50)),
-            ] {
+            for (a, b) in [(0, Some(0)), (0, Some(3)), (2, Some(9)), (5, None), (0, None), (30, Some(50))] {
                 let mut out = vec![0.0; x.len()];
-                window_forward(agg, &x, a, b, &mut out, &mut sc);
+                let mut logw = vec![0.0; x.len()];
+                window_forward(agg, &x, (a, b), &mut out, &mut logw, &mut sc);
                 let want = naive_window(agg, &x, a, b);
                 for (o, w) in out.iter().zip(&want) {
                     assert!((o - w).abs() < 1e-9, "{agg:?} [{a},{b:?}]: {o} vs {w}");
@@ -660,12 +595,8 @@ mod tests {
 
     #[test]
     fn window_backward_matches_naive_in_every_mode() {
-        let x: Vec<f64> = (0..29)
-            .map(|i| ((i * 104729) % 31) as f64 * 0.21 - 2.0)
-            .collect();
-        let g: Vec<f64> = (0..29)
-            .map(|i| ((i * 37) % 11) as f64 * 0.1 - 0.4)
-            .collect();
+        let x: Vec<f64> = (0..29).map(|i| ((i * 104729) % 31) as f64 * 0.21 - 2.0).collect();
+        let g: Vec<f64> = (0..29).map(|i| ((i * 37) % 11) as f64 * 0.1 - 0.4).collect();
         let mut sc = Scratch::default();
         for agg in [
             Agg::Soft { beta: 2.0 },
@@ -675,12 +606,14 @@ mod tests {
         ] {
             for (a, b) in [(0, Some(4)), (3, Some(7)), (1, None), (25, Some(40))] {
                 let mut gx = vec![0.0; x.len()];
-                window_backward(agg, &x, a, b, &g, &mut gx, &mut sc);
+                let (mut out, mut logw) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+                window_forward(agg, &x, (a, b), &mut out, &mut logw, &mut sc);
+                window_backward(agg, &x, (a, b), &out, &logw, &g, &mut gx, &mut sc);
                 let mut want = vec![0.0; x.len()];
                 for t in 0..x.len() {
                     let (lo, hi) = window(t, a, b, x.len());
-                    let out = reduce(agg, &x[lo..=hi]);
-                    reduce_backward(agg, &x[lo..=hi], out, g[t], &mut want[lo..=hi]);
+                    let (out, logw) = reduce_logw(agg, &x[lo..=hi]);
+                    reduce_backward(agg, &x[lo..=hi], out, logw, g[t], &mut want[lo..=hi]);
                 }
                 for (o, w) in gx.iter().zip(&want) {
                     assert!((o - w).abs() < 1e-9, "{agg:?} [{a},{b:?}]: {o} vs {w}");

@@ -30,10 +30,7 @@ pub struct Interval {
 impl Interval {
     /// `[start, end]`.
     pub fn bounded(start: usize, end: usize) -> Self {
-        Self {
-            start,
-            end: Some(end),
-        }
+        Self { start, end: Some(end) }
     }
 
     /// `[start, ∞)`: to the end of the path.
@@ -141,11 +138,7 @@ impl Formula {
 
     /// `signal op threshold`.
     pub fn compare(signal: impl Into<String>, op: CmpOp, threshold: f64) -> Self {
-        Formula::Compare {
-            signal: signal.into(),
-            op,
-            threshold,
-        }
+        Formula::Compare { signal: signal.into(), op, threshold }
     }
 
     /// `signal > threshold`.
@@ -228,10 +221,7 @@ impl Formula {
     pub fn children(&self) -> impl Iterator<Item = &Formula> {
         let v: Vec<&Formula> = match self {
             Formula::True | Formula::False | Formula::Atom(_) | Formula::Compare { .. } => vec![],
-            Formula::Not(f)
-            | Formula::Next(f)
-            | Formula::Eventually(_, f)
-            | Formula::Globally(_, f) => {
+            Formula::Not(f) | Formula::Next(f) | Formula::Eventually(_, f) | Formula::Globally(_, f) => {
                 vec![f]
             }
             Formula::And(v) | Formula::Or(v) => v.iter().collect(),
@@ -268,9 +258,7 @@ impl Formula {
             Formula::True | Formula::False | Formula::Atom(_) | Formula::Compare { .. } => Some(0),
             Formula::Not(f) => sub(f),
             Formula::Next(f) => sub(f).map(|h| h + 1),
-            Formula::And(v) | Formula::Or(v) => {
-                v.iter().try_fold(0, |m, f| sub(f).map(|h| m.max(h)))
-            }
+            Formula::And(v) | Formula::Or(v) => v.iter().try_fold(0, |m, f| sub(f).map(|h| m.max(h))),
             Formula::Implies(l, r) => Some(sub(l)?.max(sub(r)?)),
             Formula::Eventually(i, f) | Formula::Globally(i, f) => Some(i.end? + sub(f)?),
             Formula::Until(i, l, r) => Some(i.end? + sub(l)?.max(sub(r)?)),

@@ -6,6 +6,9 @@
 //! half-spaces ([`Halfspace`]), axis-aligned box obstacles ([`AvoidBoxes`]),
 //! time-triggered signals ([`AfterStep`]) and closures ([`FnPredicate`]).
 
+// Index loops mirror the formulas they implement.
+#![allow(clippy::needless_range_loop)]
+
 use std::fmt;
 
 /// A state predicate with quantitative semantics: positive means satisfied.
@@ -61,34 +64,26 @@ pub struct Ball {
 impl Ball {
     /// A ball over the first `center.len()` state dimensions.
     pub fn new(center: impl Into<Vec<f64>>, radius: f64) -> Self {
-        Self {
-            center: center.into(),
-            radius,
-            offset: 0,
-        }
+        Self { center: center.into(), radius, offset: 0 }
     }
 }
 
 impl Predicate for Ball {
     fn value(&self, _t: usize, state: &[f64]) -> f64 {
-        let p = &state[self.offset..self.offset + self.center.len()];
-        let d2: f64 = p
-            .iter()
-            .zip(&self.center)
-            .map(|(x, c)| (x - c) * (x - c))
-            .sum();
+        let p = &state[self.offset..];
+        let d2: f64 = match self.center[..] {
+            // The planar and spatial goals of every task: unrolled.
+            [cx, cy] => (p[0] - cx) * (p[0] - cx) + (p[1] - cy) * (p[1] - cy),
+            [cx, cy, cz] => (p[0] - cx) * (p[0] - cx) + (p[1] - cy) * (p[1] - cy) + (p[2] - cz) * (p[2] - cz),
+            _ => p.iter().zip(&self.center).map(|(x, c)| (x - c) * (x - c)).sum(),
+        };
         self.radius - d2.sqrt()
     }
 
     fn value_and_grad(&self, _t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
         let k = self.center.len();
         let p = &state[self.offset..self.offset + k];
-        let d = p
-            .iter()
-            .zip(&self.center)
-            .map(|(x, c)| (x - c) * (x - c))
-            .sum::<f64>()
-            .sqrt();
+        let d = p.iter().zip(&self.center).map(|(x, c)| (x - c) * (x - c)).sum::<f64>().sqrt();
         if d > 0.0 {
             let g = &mut grad[self.offset..self.offset + k];
             for ((gi, x), c) in g.iter_mut().zip(p).zip(&self.center) {
@@ -114,12 +109,7 @@ pub struct Halfspace {
 
 impl Predicate for Halfspace {
     fn value(&self, _t: usize, state: &[f64]) -> f64 {
-        self.normal
-            .iter()
-            .zip(state)
-            .map(|(a, x)| a * x)
-            .sum::<f64>()
-            - self.bound
+        self.normal.iter().zip(state).map(|(a, x)| a * x).sum::<f64>() - self.bound
     }
 
     fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
@@ -183,37 +173,96 @@ impl AxisBox {
 /// Staying out of a set of axis-aligned boxes: robustness is the signed distance to
 /// the nearest box minus a `margin` (e.g. the robot's radius), so positive means
 /// clear of every box by more than the margin. Reads the first `d` dimensions, `d`
-/// the boxes' dimension.
+/// the boxes' dimension. Inside overlapping or touching boxes the depth is that of
+/// the deepest single box (exact outside, a lower bound on depth inside).
 #[derive(Clone, Debug, PartialEq)]
 pub struct AvoidBoxes {
-    /// The obstacles; all of one dimension.
-    pub boxes: Vec<AxisBox>,
-    /// Clearance subtracted from the distance.
-    pub margin: f64,
+    boxes: Vec<AxisBox>,
+    margin: f64,
+    dim: usize,
+    // Struct-of-arrays copy for the hot loop: centres and half-sizes, box-major.
+    centers: Vec<f64>,
+    halves: Vec<f64>,
 }
 
 impl AvoidBoxes {
-    /// Squares/cubes of half-size `half` centred at `centers`.
-    pub fn cubes(centers: &[Vec<f64>], half: f64, margin: f64) -> Self {
-        let boxes = centers
-            .iter()
-            .map(|c| AxisBox {
-                center: c.clone(),
-                half: vec![half; c.len()],
-            })
-            .collect();
-        Self { boxes, margin }
+    /// Avoid `boxes` (all of one dimension) by more than `margin`.
+    ///
+    /// # Panics
+    /// If the boxes differ in dimension or a half-size is negative.
+    pub fn new(boxes: Vec<AxisBox>, margin: f64) -> Self {
+        let dim = boxes.first().map_or(0, |b| b.center.len());
+        for b in &boxes {
+            assert!(b.center.len() == dim && b.half.len() == dim, "boxes must all have dimension {dim}");
+            assert!(b.half.iter().all(|h| *h >= 0.0), "box half-sizes must be >= 0");
+        }
+        let centers = boxes.iter().flat_map(|b| b.center.iter().copied()).collect();
+        let halves = boxes.iter().flat_map(|b| b.half.iter().copied()).collect();
+        Self { boxes, margin, dim, centers, halves }
     }
 
+    /// Squares/cubes of half-size `half` centred at `centers`.
+    pub fn cubes(centers: &[Vec<f64>], half: f64, margin: f64) -> Self {
+        let boxes =
+            centers.iter().map(|c| AxisBox { center: c.clone(), half: vec![half; c.len()] }).collect();
+        Self::new(boxes, margin)
+    }
+
+    /// The obstacles.
+    pub fn boxes(&self) -> &[AxisBox] {
+        &self.boxes
+    }
+
+    /// The clearance subtracted from the distance.
+    pub fn margin(&self) -> f64 {
+        self.margin
+    }
+
+    /// The nearest box and the signed distance to it. Hot path (the walls clause of
+    /// every ground task): each box gets a score, its squared distance outside or
+    /// its (negative) depth inside, so that one branch-free minimum and one square
+    /// root suffice.
     fn nearest(&self, p: &[f64]) -> (usize, f64) {
-        let mut best = (0, f64::INFINITY);
-        for (i, b) in self.boxes.iter().enumerate() {
-            let d = b.signed_distance(p, None);
-            if d < best.1 {
-                best = (i, d);
+        match self.dim {
+            2 => self.nearest_d::<2>(p),
+            3 => self.nearest_d::<3>(p),
+            _ => self.nearest_any(p),
+        }
+    }
+
+    fn nearest_d<const D: usize>(&self, p: &[f64]) -> (usize, f64) {
+        let p: &[f64; D] = p[..D].try_into().expect("state has the boxes' dimension");
+        let mut best = (usize::MAX, f64::INFINITY);
+        for (i, (c, h)) in self.centers.chunks_exact(D).zip(self.halves.chunks_exact(D)).enumerate() {
+            let mut out2 = 0.0;
+            let mut qmax = f64::NEG_INFINITY;
+            for k in 0..D {
+                let q = (p[k] - c[k]).abs() - h[k];
+                out2 += q.max(0.0) * q.max(0.0);
+                qmax = qmax.max(q);
+            }
+            let score = if qmax > 0.0 { out2 } else { qmax };
+            if score < best.1 {
+                best = (i, score);
             }
         }
-        best
+        Self::finish(best)
+    }
+
+    fn nearest_any(&self, p: &[f64]) -> (usize, f64) {
+        let mut best = (usize::MAX, f64::INFINITY);
+        for (i, b) in self.boxes.iter().enumerate() {
+            let d = b.signed_distance(p, None);
+            let score = if d > 0.0 { d * d } else { d };
+            if score < best.1 {
+                best = (i, score);
+            }
+        }
+        Self::finish(best)
+    }
+
+    fn finish((i, score): (usize, f64)) -> (usize, f64) {
+        if score > 0.0 { (i, score.sqrt()) } else { (i, score) }
     }
 }
 
@@ -224,26 +273,18 @@ impl Predicate for AvoidBoxes {
 
     fn value_and_grad(&self, _t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
         let (i, d) = self.nearest(state);
-        let k = self.required_dim();
-        let mut g = [0.0; 8];
-        let mut gv;
-        let gs: &mut [f64] = if k <= 8 {
-            &mut g[..k]
-        } else {
-            gv = vec![0.0; k];
-            &mut gv
-        };
         if let Some(b) = self.boxes.get(i) {
-            b.signed_distance(state, Some(gs));
-        }
-        for (o, gi) in grad.iter_mut().zip(gs.iter()) {
-            *o += scale * gi;
+            let mut g = vec![0.0; self.dim];
+            b.signed_distance(state, Some(&mut g));
+            for (o, gi) in grad.iter_mut().zip(&g) {
+                *o += scale * gi;
+            }
         }
         d - self.margin
     }
 
     fn required_dim(&self) -> usize {
-        self.boxes.first().map_or(0, |b| b.center.len())
+        self.dim
     }
 }
 
@@ -327,18 +368,11 @@ pub struct FnPredicate {
 impl FnPredicate {
     /// A predicate reading `dim` state dimensions, differentiated numerically.
     pub fn new(dim: usize, value: impl Fn(usize, &[f64]) -> f64 + Send + Sync + 'static) -> Self {
-        Self {
-            value: Box::new(value),
-            grad: None,
-            dim,
-        }
+        Self { value: Box::new(value), grad: None, dim }
     }
 
     /// Supplies the exact gradient: `grad(t, state, out)` writes `∂value/∂state` into `out`.
-    pub fn with_gradient(
-        mut self,
-        grad: impl Fn(usize, &[f64], &mut [f64]) + Send + Sync + 'static,
-    ) -> Self {
+    pub fn with_gradient(mut self, grad: impl Fn(usize, &[f64], &mut [f64]) + Send + Sync + 'static) -> Self {
         self.grad = Some(Box::new(grad));
         self
     }

@@ -68,25 +68,22 @@ pub struct Program {
 }
 
 impl Program {
-    /// Compiles `formula`. Identical atoms share one column; `φ ⇒ ψ` becomes `¬φ ∨ ψ`.
+    /// Compiles `formula`. Identical atoms share one column, identical sub-formulas
+    /// one node (the Loop task names each goal three times); `φ ⇒ ψ` becomes `¬φ ∨ ψ`.
     pub fn compile(formula: &Formula) -> Self {
-        let mut p = Program {
-            ops: Vec::new(),
-            atoms: Vec::new(),
-        };
+        let mut p = Program { ops: Vec::new(), atoms: Vec::new() };
         let mut index: HashMap<String, usize> = HashMap::new();
-        p.emit(formula, &mut index);
+        let mut shared: HashMap<String, usize> = HashMap::new();
+        p.emit(formula, &mut index, &mut shared);
         p
     }
 
     fn column(&mut self, atom: Atom, index: &mut HashMap<String, usize>) -> usize {
         let key = match &atom {
             Atom::Name(n) => n.clone(),
-            Atom::Compare {
-                name,
-                op,
-                threshold,
-            } => format!("{name} {} {}", op.symbol(), threshold.to_bits()),
+            Atom::Compare { name, op, threshold } => {
+                format!("{name} {} {}", op.symbol(), threshold.to_bits())
+            }
         };
         *index.entry(key).or_insert_with(|| {
             self.atoms.push(atom);
@@ -94,41 +91,57 @@ impl Program {
         })
     }
 
-    fn emit(&mut self, f: &Formula, index: &mut HashMap<String, usize>) -> usize {
+    fn emit(
+        &mut self,
+        f: &Formula,
+        index: &mut HashMap<String, usize>,
+        shared: &mut HashMap<String, usize>,
+    ) -> usize {
+        // `Debug` names every variant and quotes every name, so equal keys mean
+        // structurally equal sub-formulas.
+        let key = format!("{f:?}");
+        if let Some(&node) = shared.get(&key) {
+            return node;
+        }
+        let node = self.emit_new(f, index, shared);
+        shared.insert(key, node);
+        node
+    }
+
+    fn emit_new(
+        &mut self,
+        f: &Formula,
+        index: &mut HashMap<String, usize>,
+        shared: &mut HashMap<String, usize>,
+    ) -> usize {
         let op = match f {
             Formula::True => Op::Const(true),
             Formula::False => Op::Const(false),
             Formula::Atom(n) => Op::Column(self.column(Atom::Name(n.clone()), index)),
-            Formula::Compare {
-                signal,
-                op,
-                threshold,
-            } => {
-                let atom = Atom::Compare {
-                    name: signal.clone(),
-                    op: *op,
-                    threshold: *threshold,
-                };
+            Formula::Compare { signal, op, threshold } => {
+                let atom = Atom::Compare { name: signal.clone(), op: *op, threshold: *threshold };
                 Op::Column(self.column(atom, index))
             }
-            Formula::Not(c) => Op::Not(self.emit(c, index)),
+            Formula::Not(c) => Op::Not(self.emit(c, index, shared)),
             Formula::And(v) if v.is_empty() => Op::Const(true),
             Formula::Or(v) if v.is_empty() => Op::Const(false),
-            Formula::And(v) | Formula::Or(v) if v.len() == 1 => return self.emit(&v[0], index),
-            Formula::And(v) => Op::And(v.iter().map(|c| self.emit(c, index)).collect()),
-            Formula::Or(v) => Op::Or(v.iter().map(|c| self.emit(c, index)).collect()),
+            Formula::And(v) | Formula::Or(v) if v.len() == 1 => {
+                return self.emit(&v[0], index, shared);
+            }
+            Formula::And(v) => Op::And(v.iter().map(|c| self.emit(c, index, shared)).collect()),
+            Formula::Or(v) => Op::Or(v.iter().map(|c| self.emit(c, index, shared)).collect()),
             Formula::Implies(l, r) => {
-                let l = self.emit(l, index);
+                let l = self.emit(l, index, shared);
                 self.ops.push(Op::Not(l));
                 let nl = self.ops.len() - 1;
-                Op::Or(vec![nl, self.emit(r, index)])
+                Op::Or(vec![nl, self.emit(r, index, shared)])
             }
-            Formula::Next(c) => Op::Next(self.emit(c, index)),
-            Formula::Eventually(iv, c) => Op::Eventually(*iv, self.emit(c, index)),
-            Formula::Globally(iv, c) => Op::Globally(*iv, self.emit(c, index)),
+            Formula::Next(c) => Op::Next(self.emit(c, index, shared)),
+            Formula::Eventually(iv, c) => Op::Eventually(*iv, self.emit(c, index, shared)),
+            Formula::Globally(iv, c) => Op::Globally(*iv, self.emit(c, index, shared)),
             Formula::Until(iv, l, r) => {
-                let l = self.emit(l, index);
-                Op::Until(*iv, l, self.emit(r, index))
+                let l = self.emit(l, index, shared);
+                Op::Until(*iv, l, self.emit(r, index, shared))
             }
         };
         self.ops.push(op);
@@ -163,18 +176,18 @@ impl Program {
     pub fn forward(&self, values: &[f64], steps: usize, sem: &Semantics, ws: &mut Workspace) {
         let n = steps;
         let p = self.atoms.len();
-        assert!(
-            n > 0 && values.len() == n * p,
-            "values must be steps × columns"
-        );
+        assert!(n > 0 && values.len() == n * p, "values must be steps × columns");
         ws.n = n;
         ws.vals.clear();
         ws.vals.resize(self.ops.len() * n, 0.0);
+        ws.logw.clear();
+        ws.logw.resize(self.ops.len() * n, 0.0);
         let logic = sem.logic();
         let temporal = sem.temporal();
         for (i, op) in self.ops.iter().enumerate() {
             let (done, rest) = ws.vals.split_at_mut(i * n);
             let out = &mut rest[..n];
+            let logw = &mut ws.logw[i * n..(i + 1) * n];
             let sig = |j: usize| &done[j * n..(j + 1) * n];
             match op {
                 Op::Const(b) => out.fill(if *b { sem.top } else { -sem.top }),
@@ -189,13 +202,9 @@ impl Program {
                     }
                 }
                 Op::And(cs) | Op::Or(cs) => {
-                    let dir = if matches!(op, Op::And(_)) {
-                        Dir::Min
-                    } else {
-                        Dir::Max
-                    };
+                    let dir = if matches!(op, Op::And(_)) { Dir::Min } else { Dir::Max };
                     let agg = Agg::new(logic, dir);
-                    nary_forward(agg, cs, done, n, out, &mut ws.operands);
+                    nary_forward(agg, cs, done, n, out, logw, &mut ws.operands);
                 }
                 Op::Next(c) => {
                     let x = sig(*c);
@@ -204,19 +213,9 @@ impl Program {
                     }
                 }
                 Op::Eventually(iv, c) | Op::Globally(iv, c) => {
-                    let dir = if matches!(op, Op::Eventually(..)) {
-                        Dir::Max
-                    } else {
-                        Dir::Min
-                    };
-                    aggregate::window_forward(
-                        Agg::new(temporal, dir),
-                        sig(*c),
-                        iv.start,
-                        iv.end,
-                        out,
-                        &mut ws.scratch,
-                    );
+                    let dir = if matches!(op, Op::Eventually(..)) { Dir::Max } else { Dir::Min };
+                    let agg = Agg::new(temporal, dir);
+                    aggregate::window_forward(agg, sig(*c), (iv.start, iv.end), out, logw, &mut ws.scratch);
                 }
                 Op::Until(iv, l, r) => {
                     aggregate::until_forward(
@@ -266,11 +265,7 @@ impl Program {
                     }
                 }
                 op @ (Op::And(cs) | Op::Or(cs)) => {
-                    let dir = if matches!(op, Op::And(_)) {
-                        Dir::Min
-                    } else {
-                        Dir::Max
-                    };
+                    let dir = if matches!(op, Op::And(_)) { Dir::Min } else { Dir::Max };
                     let agg = Agg::new(logic, dir);
                     let out = sig(i);
                     let mut gv = std::mem::take(&mut ws.operand_grads);
@@ -282,7 +277,8 @@ impl Program {
                         ws.operands.extend(cs.iter().map(|&c| vals[c * n + tt]));
                         gv.clear();
                         gv.resize(cs.len(), 0.0);
-                        aggregate::reduce_backward(agg, &ws.operands, out[tt], g[tt], &mut gv);
+                        let lw = ws.logw[i * n + tt];
+                        aggregate::reduce_backward(agg, &ws.operands, out[tt], lw, g[tt], &mut gv);
                         for (&c, gc) in cs.iter().zip(&gv) {
                             adj_done[c * n + tt] += gc;
                         }
@@ -295,21 +291,32 @@ impl Program {
                     }
                 }
                 op @ (Op::Eventually(iv, c) | Op::Globally(iv, c)) => {
-                    let dir = if matches!(op, Op::Eventually(..)) {
-                        Dir::Max
-                    } else {
-                        Dir::Min
-                    };
+                    let dir = if matches!(op, Op::Eventually(..)) { Dir::Max } else { Dir::Min };
                     let gc = &mut adj_done[c * n..(c + 1) * n];
-                    aggregate::window_backward(
-                        Agg::new(temporal, dir),
-                        sig(*c),
+                    let (agg, lw) = (Agg::new(temporal, dir), &ws.logw[i * n..(i + 1) * n]);
+                    let range = (iv.start, iv.end);
+                    aggregate::window_backward(agg, sig(*c), range, sig(i), lw, g, gc, &mut ws.scratch);
+                }
+                Op::Until(iv, l, r) if l == r => {
+                    // `φ U φ`: both operands are one shared node; accumulate separately.
+                    let mut gl = vec![0.0; n];
+                    let mut gr = vec![0.0; n];
+                    let x = sig(*l);
+                    aggregate::until_backward(
+                        temporal,
+                        x,
+                        x,
                         iv.start,
                         iv.end,
+                        sig(i),
                         g,
-                        gc,
+                        &mut gl,
+                        &mut gr,
                         &mut ws.scratch,
                     );
+                    for ((a, x), y) in adj_done[l * n..(l + 1) * n].iter_mut().zip(gl).zip(gr) {
+                        *a += x + y;
+                    }
                 }
                 Op::Until(iv, l, r) => {
                     // Children come before the parent, so both slices are in adj_done.
@@ -332,10 +339,8 @@ impl Program {
     }
 }
 
-/// Two distinct node slices of one buffer, mutably (compiled nodes are never shared,
-/// so the two operands of an until are always distinct).
+/// Two distinct node slices of one buffer, mutably.
 fn two_mut(buf: &mut [f64], l: usize, r: usize, n: usize) -> (&mut [f64], &mut [f64]) {
-    assert_ne!(l, r, "compiled until operands are distinct nodes");
     if l < r {
         let (a, b) = buf.split_at_mut(r * n);
         (&mut a[l * n..(l + 1) * n], &mut b[..n])
@@ -351,6 +356,7 @@ fn nary_forward(
     done: &[f64],
     n: usize,
     out: &mut [f64],
+    logw: &mut [f64],
     tmp: &mut Vec<f64>,
 ) {
     if let Agg::Hard(dir) = agg {
@@ -373,7 +379,7 @@ fn nary_forward(
     for (t, o) in out.iter_mut().enumerate() {
         tmp.clear();
         tmp.extend(cs.iter().map(|&c| done[c * n + t]));
-        *o = aggregate::reduce(agg, tmp);
+        (*o, logw[t]) = aggregate::reduce_logw(agg, tmp);
     }
 }
 
@@ -382,6 +388,8 @@ fn nary_forward(
 pub struct Workspace {
     n: usize,
     vals: Vec<f64>,
+    // ln Σ e^{βv} of each smooth and/or/window node and step, for the backward pass.
+    logw: Vec<f64>,
     adj: Vec<f64>,
     operands: Vec<f64>,
     operand_grads: Vec<f64>,

@@ -52,27 +52,17 @@ pub const DEFAULT_TOP: f64 = 1.0e9;
 impl Semantics {
     /// Exact min/max semantics.
     pub fn hard() -> Self {
-        Self {
-            smoothing: Smoothing::Hard,
-            smooth_temporal: true,
-            top: DEFAULT_TOP,
-        }
+        Self { smoothing: Smoothing::Hard, smooth_temporal: true, top: DEFAULT_TOP }
     }
 
     /// The paper's soft semantics with sharpness `alpha` (authors used 2).
     pub fn soft(alpha: f64) -> Self {
-        Self {
-            smoothing: Smoothing::Soft { alpha },
-            ..Self::hard()
-        }
+        Self { smoothing: Smoothing::Soft { alpha }, ..Self::hard() }
     }
 
     /// Log-sum-exp semantics with the given temperature.
     pub fn lse(temperature: f64) -> Self {
-        Self {
-            smoothing: Smoothing::LogSumExp { temperature },
-            ..Self::hard()
-        }
+        Self { smoothing: Smoothing::LogSumExp { temperature }, ..Self::hard() }
     }
 
     /// Smooth only `∧`, `∨`, `⇒`; temporal operators stay hard.
@@ -109,11 +99,7 @@ impl Semantics {
     }
 
     pub(crate) fn temporal(&self) -> Smoothing {
-        if self.smooth_temporal {
-            self.smoothing
-        } else {
-            Smoothing::Hard
-        }
+        if self.smooth_temporal { self.smoothing } else { Smoothing::Hard }
     }
 }
 

@@ -60,11 +60,7 @@ pub enum SpecError {
 }
 
 fn signal_list(signals: &[String]) -> String {
-    if signals.is_empty() {
-        String::new()
-    } else {
-        format!(" (signals: {})", signals.join(", "))
-    }
+    if signals.is_empty() { String::new() } else { format!(" (signals: {})", signals.join(", ")) }
 }
 
 /// A path or semantics that cannot be evaluated.
@@ -82,9 +78,7 @@ pub enum EvalError {
         dim: usize,
     },
     /// A batch's length is not a whole number of paths of the given length.
-    #[error(
-        "the batch has {len} numbers, not a multiple of steps × state dimension = {steps} × {dim}"
-    )]
+    #[error("the batch has {len} numbers, not a multiple of steps × state dimension = {steps} × {dim}")]
     BatchShape {
         /// Numbers given.
         len: usize,
@@ -100,11 +94,7 @@ pub enum EvalError {
 
 /// How an atom was resolved against the bindings and signals.
 pub(crate) enum Resolved {
-    Predicate {
-        sign: f64,
-        threshold: f64,
-        shifted: bool,
-    },
+    Predicate { sign: f64, threshold: f64, shifted: bool },
     Signal(SignalCompare),
 }
 
@@ -135,20 +125,9 @@ pub(crate) fn resolve<P: ?Sized>(
             let signal = signals.iter().position(|s| s == name);
             match (bindings.contains_key(name), signal) {
                 (true, Some(_)) => Err(SpecError::Ambiguous(name.into())),
-                (true, None) => Ok(Resolved::Predicate {
-                    sign,
-                    threshold,
-                    shifted,
-                }),
-                (false, Some(index)) => Ok(Resolved::Signal(SignalCompare {
-                    index,
-                    sign,
-                    threshold,
-                })),
-                (false, None) => Err(SpecError::Unbound {
-                    name: name.into(),
-                    signals: signals.to_vec(),
-                }),
+                (true, None) => Ok(Resolved::Predicate { sign, threshold, shifted }),
+                (false, Some(index)) => Ok(Resolved::Signal(SignalCompare { index, sign, threshold })),
+                (false, None) => Err(SpecError::Unbound { name: name.into(), signals: signals.to_vec() }),
             }
         })
         .collect()
@@ -193,11 +172,7 @@ impl SpecBuilder {
         let program = Program::compile(&self.formula);
         let state_dim = self.state_dim.unwrap_or_else(|| {
             if self.signals.is_empty() {
-                self.bindings
-                    .values()
-                    .map(|p| p.required_dim())
-                    .max()
-                    .unwrap_or(0)
+                self.bindings.values().map(|p| p.required_dim()).max().unwrap_or(0)
             } else {
                 self.signals.len()
             }
@@ -208,12 +183,9 @@ impl SpecBuilder {
             .into_iter()
             .zip(program.atoms())
             .map(|(r, atom)| match r {
-                Resolved::Predicate {
-                    sign,
-                    threshold,
-                    shifted,
-                    ..
-                } => Err((atom.name().to_string(), sign, threshold, shifted)),
+                Resolved::Predicate { sign, threshold, shifted, .. } => {
+                    Err((atom.name().to_string(), sign, threshold, shifted))
+                }
                 Resolved::Signal(s) => Ok(s),
             })
             .collect();
@@ -240,11 +212,7 @@ impl SpecBuilder {
                         }
                     };
                     predicates.push(if shifted {
-                        Box::new(Shifted {
-                            inner: p,
-                            sign,
-                            threshold,
-                        })
+                        Box::new(Shifted { inner: p, sign, threshold })
                     } else {
                         Box::new(p)
                     });
@@ -254,13 +222,7 @@ impl SpecBuilder {
         for p in &predicates {
             debug_assert!(p.required_dim() <= state_dim);
         }
-        Ok(Spec {
-            formula: self.formula,
-            program,
-            predicates,
-            state_dim,
-            signals: self.signals,
-        })
+        Ok(Spec { formula: self.formula, program, predicates, state_dim, signals: self.signals })
     }
 }
 
@@ -291,12 +253,7 @@ impl std::fmt::Debug for Spec {
 impl Spec {
     /// Starts binding `formula`.
     pub fn builder(formula: Formula) -> SpecBuilder {
-        SpecBuilder {
-            formula,
-            signals: Vec::new(),
-            state_dim: None,
-            bindings: HashMap::new(),
-        }
+        SpecBuilder { formula, signals: Vec::new(), state_dim: None, bindings: HashMap::new() }
     }
 
     /// The formula.
@@ -321,12 +278,7 @@ impl Spec {
 
     /// A reusable evaluator (allocation-free once warm).
     pub fn evaluator(&self) -> Evaluator<'_> {
-        Evaluator {
-            spec: self,
-            ws: Workspace::new(),
-            values: Vec::new(),
-            dvalues: Vec::new(),
-        }
+        Evaluator { spec: self, ws: Workspace::new(), values: Vec::new(), dvalues: Vec::new() }
     }
 
     /// Robustness at step 0.
@@ -354,11 +306,7 @@ impl Spec {
             return Err(EvalError::Empty);
         }
         if per == 0 || len % per != 0 {
-            return Err(EvalError::BatchShape {
-                len,
-                steps,
-                dim: self.state_dim,
-            });
+            return Err(EvalError::BatchShape { len, steps, dim: self.state_dim });
         }
         Ok(per)
     }
@@ -377,10 +325,7 @@ impl Spec {
         #[cfg(feature = "parallel")]
         {
             use rayon::prelude::*;
-            Ok(paths
-                .par_chunks(per)
-                .map_init(|| self.evaluator(), run)
-                .collect())
+            Ok(paths.par_chunks(per).with_min_len(64).map_init(|| self.evaluator(), run).collect())
         }
         #[cfg(not(feature = "parallel"))]
         {
@@ -400,11 +345,7 @@ impl Spec {
     ) -> Result<Vec<f64>, EvalError> {
         let per = self.check_batch(paths.len(), steps)?;
         if grads.len() != paths.len() {
-            return Err(EvalError::BatchShape {
-                len: grads.len(),
-                steps,
-                dim: self.state_dim,
-            });
+            return Err(EvalError::BatchShape { len: grads.len(), steps, dim: self.state_dim });
         }
         sem.validate()?;
         let run = |ev: &mut Evaluator<'_>, (p, g): (&[f64], &mut [f64])| {
@@ -417,17 +358,14 @@ impl Spec {
             Ok(paths
                 .par_chunks(per)
                 .zip(grads.par_chunks_mut(per))
+                .with_min_len(64)
                 .map_init(|| self.evaluator(), run)
                 .collect())
         }
         #[cfg(not(feature = "parallel"))]
         {
             let mut ev = self.evaluator();
-            Ok(paths
-                .chunks(per)
-                .zip(grads.chunks_mut(per))
-                .map(|pg| run(&mut ev, pg))
-                .collect())
+            Ok(paths.chunks(per).zip(grads.chunks_mut(per)).map(|pg| run(&mut ev, pg)).collect())
         }
     }
 }
@@ -447,16 +385,10 @@ impl Evaluator<'_> {
             return Err(EvalError::Empty);
         }
         if dim == 0 {
-            return Err(EvalError::Shape {
-                len: path.len(),
-                dim,
-            });
+            return Err(EvalError::Shape { len: path.len(), dim });
         }
         if path.len() % dim != 0 {
-            return Err(EvalError::Shape {
-                len: path.len(),
-                dim,
-            });
+            return Err(EvalError::Shape { len: path.len(), dim });
         }
         Ok(path.len() / dim)
     }
@@ -471,9 +403,7 @@ impl Evaluator<'_> {
             let s = &path[t * dim..(t + 1) * dim];
             self.values.extend(preds.iter().map(|p| p.value(t, s)));
         }
-        self.spec
-            .program
-            .forward(&self.values, n, sem, &mut self.ws);
+        self.spec.program.forward(&self.values, n, sem, &mut self.ws);
         Ok(n)
     }
 
@@ -484,12 +414,7 @@ impl Evaluator<'_> {
     }
 
     /// Robustness at start step `t` (clamped to the last step).
-    pub fn robustness_at(
-        &mut self,
-        path: &[f64],
-        t: usize,
-        sem: &Semantics,
-    ) -> Result<f64, EvalError> {
+    pub fn robustness_at(&mut self, path: &[f64], t: usize, sem: &Semantics) -> Result<f64, EvalError> {
         let n = self.forward(path, sem)?;
         Ok(self.ws.signal()[t.min(n - 1)])
     }
@@ -505,16 +430,11 @@ impl Evaluator<'_> {
     ) -> Result<f64, EvalError> {
         let n = self.forward(path, sem)?;
         if grad.len() != path.len() {
-            return Err(EvalError::Shape {
-                len: grad.len(),
-                dim: self.spec.state_dim,
-            });
+            return Err(EvalError::Shape { len: grad.len(), dim: self.spec.state_dim });
         }
         let t = t.min(n - 1);
         let rho = self.ws.signal()[t];
-        self.spec
-            .program
-            .backward(t, sem, &mut self.ws, &mut self.dvalues);
+        self.spec.program.backward(t, sem, &mut self.ws, &mut self.dvalues);
         let dim = self.spec.state_dim;
         let np = self.spec.predicates.len();
         for step in 0..n {

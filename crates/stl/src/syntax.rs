@@ -52,10 +52,7 @@ impl ParseError {
     /// The error followed by the offending line and a caret under the column.
     pub fn render(&self, source: &str) -> String {
         let text = source.lines().nth(self.line - 1).unwrap_or("");
-        format!(
-            "{self}\n  {text}\n  {}^",
-            " ".repeat(self.column.saturating_sub(1))
-        )
+        format!("{self}\n  {text}\n  {}^", " ".repeat(self.column.saturating_sub(1)))
     }
 }
 
@@ -117,11 +114,7 @@ fn lex(src: &str) -> Result<Vec<Token>, ParseError> {
         let (l0, c0) = (line, col);
         let peek = chars.get(i + 1).copied();
         let mut take = |n: usize, tok: Tok, i: &mut usize, col: &mut usize| {
-            out.push(Token {
-                tok,
-                line: l0,
-                column: c0,
-            });
+            out.push(Token { tok, line: l0, column: c0 });
             *i += n;
             *col += n;
         };
@@ -147,18 +140,8 @@ fn lex(src: &str) -> Result<Vec<Token>, ParseError> {
             ']' => take(1, Tok::RBrack, &mut i, &mut col),
             ',' => take(1, Tok::Comma, &mut i, &mut col),
             '!' => take(1, Tok::Bang, &mut i, &mut col),
-            '&' => take(
-                if peek == Some('&') { 2 } else { 1 },
-                Tok::Amp,
-                &mut i,
-                &mut col,
-            ),
-            '|' => take(
-                if peek == Some('|') { 2 } else { 1 },
-                Tok::Bar,
-                &mut i,
-                &mut col,
-            ),
+            '&' => take(if peek == Some('&') { 2 } else { 1 }, Tok::Amp, &mut i, &mut col),
+            '|' => take(if peek == Some('|') { 2 } else { 1 }, Tok::Bar, &mut i, &mut col),
             '=' if peek == Some('>') => take(2, Tok::Arrow, &mut i, &mut col),
             '-' if peek == Some('>') => take(2, Tok::Arrow, &mut i, &mut col),
             '>' | '<' => {
@@ -201,20 +184,11 @@ fn lex(src: &str) -> Result<Vec<Token>, ParseError> {
                 take(j - start, Tok::Name(text), &mut i, &mut col)
             }
             other => {
-                return Err(err(
-                    l0,
-                    c0,
-                    "a formula token",
-                    format!("unexpected character '{other}'"),
-                ));
+                return Err(err(l0, c0, "a formula token", format!("unexpected character '{other}'")));
             }
         }
     }
-    out.push(Token {
-        tok: Tok::Eof,
-        line,
-        column: col,
-    });
+    out.push(Token { tok: Tok::Eof, line, column: col });
     Ok(out)
 }
 
@@ -251,12 +225,7 @@ impl Parser {
 
     fn error_here(&self, expected: impl Into<String>) -> ParseError {
         let t = &self.toks[self.pos];
-        ParseError {
-            line: t.line,
-            column: t.column,
-            expected: expected.into(),
-            found: t.tok.describe(),
-        }
+        ParseError { line: t.line, column: t.column, expected: expected.into(), found: t.tok.describe() }
     }
 
     fn is_keyword(&self, kw: &str) -> bool {
@@ -300,11 +269,7 @@ impl Parser {
             self.bump();
             v.push(self.and()?);
         }
-        Ok(if v.len() == 1 {
-            v.pop().unwrap()
-        } else {
-            Formula::Or(v)
-        })
+        Ok(if v.len() == 1 { v.pop().unwrap() } else { Formula::Or(v) })
     }
 
     fn and(&mut self) -> Result<Formula, ParseError> {
@@ -313,11 +278,7 @@ impl Parser {
             self.bump();
             v.push(self.until()?);
         }
-        Ok(if v.len() == 1 {
-            v.pop().unwrap()
-        } else {
-            Formula::And(v)
-        })
+        Ok(if v.len() == 1 { v.pop().unwrap() } else { Formula::And(v) })
     }
 
     fn until(&mut self) -> Result<Formula, ParseError> {
@@ -350,11 +311,7 @@ impl Parser {
                 self.bump();
                 let iv = self.opt_interval()?;
                 let body = Box::new(self.unary()?);
-                if n == "F" {
-                    Formula::Eventually(iv, body)
-                } else {
-                    Formula::Globally(iv, body)
-                }
+                if n == "F" { Formula::Eventually(iv, body) } else { Formula::Globally(iv, body) }
             }
             _ => self.atom()?,
         };
@@ -367,10 +324,7 @@ impl Parser {
             Tok::LParen => {
                 self.bump();
                 let f = self.implies()?;
-                self.expect(
-                    Tok::RParen,
-                    "')' to close the '(' or an operator (&, |, ->, U)",
-                )?;
+                self.expect(Tok::RParen, "')' to close the '(' or an operator (&, |, ->, U)")?;
                 Ok(f)
             }
             Tok::Name(n) if n == "true" => {
@@ -388,11 +342,7 @@ impl Parser {
                     match self.peek().clone() {
                         Tok::Num(v, _) => {
                             self.bump();
-                            Ok(Formula::Compare {
-                                signal: n,
-                                op,
-                                threshold: v,
-                            })
+                            Ok(Formula::Compare { signal: n, op, threshold: v })
                         }
                         _ => Err(self.error_here(format!("a number after '{n} {}'", op.symbol()))),
                     }
@@ -406,9 +356,7 @@ impl Parser {
 
     fn step(&mut self, what: &str) -> Result<usize, ParseError> {
         match self.peek().clone() {
-            Tok::Num(v, text)
-                if v >= 0.0 && v.fract() == 0.0 && !text.contains(['.', 'e', 'E']) =>
-            {
+            Tok::Num(v, text) if v >= 0.0 && v.fract() == 0.0 && !text.contains(['.', 'e', 'E']) => {
                 if v > MAX_STEP as f64 {
                     return Err(self.error_here(format!("{what} at most {MAX_STEP}")));
                 }
@@ -451,11 +399,7 @@ impl Parser {
 /// Parses a formula from its text syntax.
 pub fn parse(src: &str) -> Result<Formula, ParseError> {
     let toks = lex(src)?;
-    let mut p = Parser {
-        toks,
-        pos: 0,
-        depth: 0,
-    };
+    let mut p = Parser { toks, pos: 0, depth: 0 };
     let f = p.implies()?;
     if *p.peek() != Tok::Eof {
         return Err(p.error_here("an operator (&, |, ->, U) or the end of the formula"));
@@ -544,11 +488,7 @@ fn write_formula(f: &Formula, out: &mut fmt::Formatter<'_>) -> fmt::Result {
         Formula::True => write!(out, "true"),
         Formula::False => write!(out, "false"),
         Formula::Atom(n) => write!(out, "{n}"),
-        Formula::Compare {
-            signal,
-            op,
-            threshold,
-        } => write!(out, "{signal} {} {threshold}", op.symbol()),
+        Formula::Compare { signal, op, threshold } => write!(out, "{signal} {} {threshold}", op.symbol()),
         Formula::Not(c) => {
             write!(out, "!")?;
             write_at(c, 5, out)
@@ -558,15 +498,7 @@ fn write_formula(f: &Formula, out: &mut fmt::Formatter<'_>) -> fmt::Result {
             write_at(c, 5, out)
         }
         Formula::Eventually(iv, c) | Formula::Globally(iv, c) => {
-            write!(
-                out,
-                "{}",
-                if matches!(f, Formula::Eventually(..)) {
-                    "F"
-                } else {
-                    "G"
-                }
-            )?;
+            write!(out, "{}", if matches!(f, Formula::Eventually(..)) { "F" } else { "G" })?;
             write_interval(iv, out)?;
             write!(out, " ")?;
             write_at(c, 5, out)
@@ -602,23 +534,15 @@ mod tests {
     #[test]
     fn precedence_and_associativity() {
         let f = parse("F[1,2] a & b -> c").unwrap();
-        let want =
-            (Formula::atom("a").eventually(1, 2) & Formula::atom("b")).implies(Formula::atom("c"));
+        let want = (Formula::atom("a").eventually(1, 2) & Formula::atom("b")).implies(Formula::atom("c"));
         assert_eq!(f, want);
         let f = parse("a U b U c").unwrap();
-        let want =
-            Formula::atom("a").until_from(0, Formula::atom("b").until_from(0, Formula::atom("c")));
+        let want = Formula::atom("a").until_from(0, Formula::atom("b").until_from(0, Formula::atom("c")));
         assert_eq!(f, want);
         let f = parse("a -> b -> c").unwrap();
-        assert_eq!(
-            f,
-            Formula::atom("a").implies(Formula::atom("b").implies(Formula::atom("c")))
-        );
+        assert_eq!(f, Formula::atom("a").implies(Formula::atom("b").implies(Formula::atom("c"))));
         let f = parse("a | b & c").unwrap();
-        assert_eq!(
-            f,
-            Formula::atom("a") | (Formula::atom("b") & Formula::atom("c"))
-        );
+        assert_eq!(f, Formula::atom("a") | (Formula::atom("b") & Formula::atom("c")));
         assert_eq!(parse("!x > 0.5").unwrap(), !Formula::gt("x", 0.5));
     }
 

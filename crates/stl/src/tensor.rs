@@ -91,48 +91,27 @@ impl CustomOp1 for Pointwise {
         "stl-predicate"
     }
 
-    fn cpu_fwd(
-        &self,
-        storage: &CpuStorage,
-        layout: &Layout,
-    ) -> candle_core::Result<(CpuStorage, Shape)> {
+    fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
         let (b, t, d) = dims3(layout, "paths")?;
         if self.0.required_dim() > d {
-            candle_core::bail!(
-                "predicate reads {} dimensions, paths have {d}",
-                self.0.required_dim()
-            );
+            candle_core::bail!("predicate reads {} dimensions, paths have {d}", self.0.required_dim());
         }
         let x = to_f64(storage, layout)?;
-        let out: Vec<f64> = (0..b * t)
-            .map(|i| self.0.value(i % t, &x[i * d..(i + 1) * d]))
-            .collect();
+        let out: Vec<f64> = (0..b * t).map(|i| self.0.value(i % t, &x[i * d..(i + 1) * d])).collect();
         Ok((from_f64(out, storage.dtype())?, Shape::from((b, t))))
     }
 
-    fn bwd(
-        &self,
-        arg: &Tensor,
-        _res: &Tensor,
-        grad_res: &Tensor,
-    ) -> candle_core::Result<Option<Tensor>> {
+    fn bwd(&self, arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> candle_core::Result<Option<Tensor>> {
         let (b, t, d) = arg.dims3()?;
         let x: Vec<f64> = arg.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
         let g: Vec<f64> = grad_res.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
         let mut out = vec![0.0; x.len()];
         for i in 0..b * t {
             if g[i] != 0.0 {
-                self.0.value_and_grad(
-                    i % t,
-                    &x[i * d..(i + 1) * d],
-                    g[i],
-                    &mut out[i * d..(i + 1) * d],
-                );
+                self.0.value_and_grad(i % t, &x[i * d..(i + 1) * d], g[i], &mut out[i * d..(i + 1) * d]);
             }
         }
-        Ok(Some(
-            Tensor::from_vec(out, (b, t, d), arg.device())?.to_dtype(arg.dtype())?,
-        ))
+        Ok(Some(Tensor::from_vec(out, (b, t, d), arg.device())?.to_dtype(arg.dtype())?))
     }
 }
 
@@ -154,11 +133,7 @@ pub struct RobustnessOp {
 impl RobustnessOp {
     /// The op for `program` under `semantics`, robustness taken at step `start`.
     pub fn new(program: Arc<Program>, semantics: Semantics, start: usize) -> Self {
-        Self {
-            program,
-            semantics,
-            start,
-        }
+        Self { program, semantics, start }
     }
 
     fn per_path<R: Send>(
@@ -173,10 +148,7 @@ impl RobustnessOp {
         #[cfg(feature = "parallel")]
         {
             use rayon::prelude::*;
-            x.par_chunks(chunk)
-                .take(b)
-                .map_init(Workspace::new, |ws, v| f(ws, v))
-                .collect()
+            x.par_chunks(chunk).take(b).map_init(Workspace::new, |ws, v| f(ws, v)).collect()
         }
         #[cfg(not(feature = "parallel"))]
         {
@@ -191,11 +163,7 @@ impl CustomOp1 for RobustnessOp {
         "stl-robustness"
     }
 
-    fn cpu_fwd(
-        &self,
-        storage: &CpuStorage,
-        layout: &Layout,
-    ) -> candle_core::Result<(CpuStorage, Shape)> {
+    fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
         let (b, t, p) = dims3(layout, "predicate values")?;
         if p != self.program.atoms().len() || t == 0 {
             candle_core::bail!(
@@ -211,44 +179,27 @@ impl CustomOp1 for RobustnessOp {
         Ok((from_f64(out, storage.dtype())?, Shape::from(b)))
     }
 
-    fn bwd(
-        &self,
-        arg: &Tensor,
-        _res: &Tensor,
-        grad_res: &Tensor,
-    ) -> candle_core::Result<Option<Tensor>> {
+    fn bwd(&self, arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> candle_core::Result<Option<Tensor>> {
         let (b, t, p) = arg.dims3()?;
         let x: Vec<f64> = arg.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
         let g: Vec<f64> = grad_res.to_dtype(DType::F64)?.to_vec1()?;
         let parts = self.per_path(&x, b, t, p, |ws, v| {
             self.program.forward(v, t, &self.semantics, ws);
             let mut d = Vec::new();
-            self.program
-                .backward(self.start.min(t - 1), &self.semantics, ws, &mut d);
+            self.program.backward(self.start.min(t - 1), &self.semantics, ws, &mut d);
             d
         });
         let mut out = Vec::with_capacity(x.len());
         for (gi, d) in g.iter().zip(parts) {
             out.extend(d.into_iter().map(|v| v * gi));
         }
-        Ok(Some(
-            Tensor::from_vec(out, (b, t, p), arg.device())?.to_dtype(arg.dtype())?,
-        ))
+        Ok(Some(Tensor::from_vec(out, (b, t, p), arg.device())?.to_dtype(arg.dtype())?))
     }
 }
 
 enum Column {
-    Signal {
-        index: usize,
-        sign: f64,
-        threshold: f64,
-    },
-    Predicate {
-        pred: Arc<dyn TensorPredicate>,
-        sign: f64,
-        threshold: f64,
-        shifted: bool,
-    },
+    Signal { index: usize, sign: f64, threshold: f64 },
+    Predicate { pred: Arc<dyn TensorPredicate>, sign: f64, threshold: f64, shifted: bool },
 }
 
 /// Builds a [`TensorSpec`].
@@ -293,45 +244,24 @@ impl TensorSpecBuilder {
             });
         }
         let resolved = resolve(&program, &self.signals, &self.bindings)?;
-        let names: Vec<String> = program
-            .atoms()
-            .iter()
-            .map(|a| a.name().to_string())
-            .collect();
+        let names: Vec<String> = program.atoms().iter().map(|a| a.name().to_string()).collect();
         let kinds: Vec<_> = resolved
             .into_iter()
             .map(|r| match r {
                 Resolved::Signal(s) => Ok((s.index, s.sign, s.threshold)),
-                Resolved::Predicate {
-                    sign,
-                    threshold,
-                    shifted,
-                    ..
-                } => Err((sign, threshold, shifted)),
+                Resolved::Predicate { sign, threshold, shifted, .. } => Err((sign, threshold, shifted)),
             })
             .collect();
-        let mut bindings: HashMap<String, Arc<dyn TensorPredicate>> = self
-            .bindings
-            .into_iter()
-            .map(|(k, v)| (k, Arc::from(v)))
-            .collect();
+        let mut bindings: HashMap<String, Arc<dyn TensorPredicate>> =
+            self.bindings.into_iter().map(|(k, v)| (k, Arc::from(v))).collect();
         let columns = kinds
             .into_iter()
             .zip(names)
             .map(|(k, name)| match k {
-                Ok((index, sign, threshold)) => Column::Signal {
-                    index,
-                    sign,
-                    threshold,
-                },
+                Ok((index, sign, threshold)) => Column::Signal { index, sign, threshold },
                 Err((sign, threshold, shifted)) => {
                     let pred = bindings.get_mut(&name).expect("resolved").clone();
-                    Column::Predicate {
-                        pred,
-                        sign,
-                        threshold,
-                        shifted,
-                    }
+                    Column::Predicate { pred, sign, threshold, shifted }
                 }
             })
             .collect();
@@ -355,12 +285,7 @@ pub struct TensorSpec {
 impl TensorSpec {
     /// Starts binding `formula` for paths whose states have `state_dim` numbers.
     pub fn builder(formula: Formula, state_dim: usize) -> TensorSpecBuilder {
-        TensorSpecBuilder {
-            formula,
-            state_dim,
-            signals: Vec::new(),
-            bindings: HashMap::new(),
-        }
+        TensorSpecBuilder { formula, state_dim, signals: Vec::new(), bindings: HashMap::new() }
     }
 
     /// The formula.
@@ -372,35 +297,18 @@ impl TensorSpec {
     pub fn predicate_values(&self, paths: &Tensor) -> candle_core::Result<Tensor> {
         let (_, _, d) = paths.dims3()?;
         if d != self.state_dim {
-            candle_core::bail!(
-                "paths have {d} numbers per state, the spec expects {}",
-                self.state_dim
-            );
+            candle_core::bail!("paths have {d} numbers per state, the spec expects {}", self.state_dim);
         }
         let cols = self
             .columns
             .iter()
             .map(|c| match c {
-                Column::Signal {
-                    index,
-                    sign,
-                    threshold,
-                } => paths
-                    .narrow(2, *index, 1)?
-                    .squeeze(2)?
-                    .affine(*sign, -sign * threshold),
-                Column::Predicate {
-                    pred,
-                    sign,
-                    threshold,
-                    shifted,
-                } => {
+                Column::Signal { index, sign, threshold } => {
+                    paths.narrow(2, *index, 1)?.squeeze(2)?.affine(*sign, -sign * threshold)
+                }
+                Column::Predicate { pred, sign, threshold, shifted } => {
                     let v = pred.forward(paths)?;
-                    if *shifted {
-                        v.affine(*sign, -sign * threshold)
-                    } else {
-                        Ok(v)
-                    }
+                    if *shifted { v.affine(*sign, -sign * threshold) } else { Ok(v) }
                 }
             })
             .collect::<candle_core::Result<Vec<_>>>()?;

@@ -3,23 +3,13 @@
 mod common;
 
 use stl::{
-    AfterStep, AvoidBoxes, Ball, EvalError, FnPredicate, Predicate, Semantics, Spec, SpecError,
-    parse,
+    AfterStep, AvoidBoxes, Ball, EvalError, FnPredicate, Predicate, Semantics, Spec, SpecError, parse,
 };
 
 #[test]
 fn unbound_name_is_an_error_that_names_it() {
-    let err = Spec::builder(parse("F goal & x > 1").unwrap())
-        .signals(["x"])
-        .build()
-        .unwrap_err();
-    assert_eq!(
-        err,
-        SpecError::Unbound {
-            name: "goal".into(),
-            signals: vec!["x".into()]
-        }
-    );
+    let err = Spec::builder(parse("F goal & x > 1").unwrap()).signals(["x"]).build().unwrap_err();
+    assert_eq!(err, SpecError::Unbound { name: "goal".into(), signals: vec!["x".into()] });
     assert!(err.to_string().contains("'goal' is not bound"));
     assert_eq!(stl::locate_name("F goal & x > 1", "goal"), Some((1, 3)));
 }
@@ -27,46 +17,24 @@ fn unbound_name_is_an_error_that_names_it() {
 #[test]
 fn ambiguous_dimension_and_threshold_errors() {
     let f = parse("x").unwrap();
-    let err = Spec::builder(f)
-        .signals(["x"])
-        .bind("x", Ball::new([0.0], 1.0))
-        .build()
-        .unwrap_err();
+    let err = Spec::builder(f).signals(["x"]).bind("x", Ball::new([0.0], 1.0)).build().unwrap_err();
     assert_eq!(err, SpecError::Ambiguous("x".into()));
-    let err = Spec::builder(parse("g").unwrap())
-        .state_dim(2)
-        .bind("g", Ball::new([0.0, 0.0, 0.0], 1.0))
-        .build();
-    assert!(matches!(
-        err,
-        Err(SpecError::Dimension {
-            needs: 3,
-            state_dim: 2,
-            ..
-        })
-    ));
+    let err =
+        Spec::builder(parse("g").unwrap()).state_dim(2).bind("g", Ball::new([0.0, 0.0, 0.0], 1.0)).build();
+    assert!(matches!(err, Err(SpecError::Dimension { needs: 3, state_dim: 2, .. })));
     let f = stl::Formula::gt("x", f64::NAN);
-    assert!(matches!(
-        Spec::builder(f).signals(["x"]).build(),
-        Err(SpecError::NonFiniteThreshold { .. })
-    ));
+    assert!(matches!(Spec::builder(f).signals(["x"]).build(), Err(SpecError::NonFiniteThreshold { .. })));
 }
 
 #[test]
 fn bad_paths_and_semantics_are_errors() {
     let spec = common::bind(parse("F a").unwrap());
-    assert_eq!(
-        spec.robustness(&[], &Semantics::hard()),
-        Err(EvalError::Empty)
-    );
+    assert_eq!(spec.robustness(&[], &Semantics::hard()), Err(EvalError::Empty));
     assert_eq!(
         spec.robustness(&[1.0, 2.0, 3.0], &Semantics::hard()),
         Err(EvalError::Shape { len: 3, dim: 2 })
     );
-    assert!(matches!(
-        spec.robustness(&[0.0, 0.0], &Semantics::soft(-1.0)),
-        Err(EvalError::Semantics(_))
-    ));
+    assert!(matches!(spec.robustness(&[0.0, 0.0], &Semantics::soft(-1.0)), Err(EvalError::Semantics(_))));
     assert!(matches!(
         spec.robustness_batch(&[0.0; 6], 2, &Semantics::hard()),
         Err(EvalError::BatchShape { .. })
@@ -105,20 +73,10 @@ fn box_obstacle_signed_distance_and_gradient() {
     // Outside: nearest box (0.5,0) is 0.45 away in x → 0.45 − margin.
     assert!((walls.value(0, &[1.2, 0.0]) - (0.45 - 0.1)).abs() < 1e-12);
     // Corner region: Euclidean distance to the corner.
-    assert!(
-        (walls.value(0, &[1.05, 0.55]) - ((0.3f64.powi(2) + 0.3f64.powi(2)).sqrt() - 0.1)).abs()
-            < 1e-12
-    );
+    assert!((walls.value(0, &[1.05, 0.55]) - ((0.3f64.powi(2) + 0.3f64.powi(2)).sqrt() - 0.1)).abs() < 1e-12);
     // Inside: negative.
     assert!(walls.value(0, &[0.05, 0.1]) < 0.0);
-    for x in [
-        [1.2, 0.0],
-        [1.05, 0.55],
-        [0.05, 0.1],
-        [-2.0, 1.0],
-        [3.1, -0.05],
-        [2.3, 0.7],
-    ] {
+    for x in [[1.2, 0.0], [1.05, 0.55], [0.05, 0.1], [-2.0, 1.0], [3.1, -0.05], [2.3, 0.7]] {
         fd_check(&walls, &x);
     }
     fd_check(&Ball::new([1.0, -1.0, 0.5], 0.3), &[0.2, 0.4, -0.1]);
@@ -136,34 +94,20 @@ fn closures_and_time_predicates() {
     // The Signal task's counter: false until step 10.
     let c = AfterStep { step: 10 };
     assert_eq!((c.value(9, &[]), c.value(10, &[])), (-1.0, 1.0));
-    let spec = Spec::builder(parse("F counter").unwrap())
-        .state_dim(1)
-        .bind("counter", c)
-        .build()
-        .unwrap();
-    assert_eq!(
-        spec.robustness(&[0.0; 5], &Semantics::hard()).unwrap(),
-        -1.0
-    );
-    assert_eq!(
-        spec.robustness(&[0.0; 11], &Semantics::hard()).unwrap(),
-        1.0
-    );
+    let spec = Spec::builder(parse("F counter").unwrap()).state_dim(1).bind("counter", c).build().unwrap();
+    assert_eq!(spec.robustness(&[0.0; 5], &Semantics::hard()).unwrap(), -1.0);
+    assert_eq!(spec.robustness(&[0.0; 11], &Semantics::hard()).unwrap(), 1.0);
 }
 
 #[test]
 fn batches_equal_single_paths() {
     let spec = common::bind(parse("F[1,2] a & G b -> c U[0,2] !b").unwrap());
     let steps = 5;
-    let paths: Vec<f64> = (0..7 * steps * 2)
-        .map(|i| ((i * 7919) % 97) as f64 / 30.0 - 1.5)
-        .collect();
+    let paths: Vec<f64> = (0..7 * steps * 2).map(|i| ((i * 7919) % 97) as f64 / 30.0 - 1.5).collect();
     for sem in [Semantics::hard(), Semantics::soft(2.0), Semantics::lse(0.3)] {
         let rs = spec.robustness_batch(&paths, steps, &sem).unwrap();
         let mut grads = vec![0.0; paths.len()];
-        let rg = spec
-            .gradient_batch(&paths, steps, &sem, &mut grads)
-            .unwrap();
+        let rg = spec.gradient_batch(&paths, steps, &sem, &mut grads).unwrap();
         for (b, p) in paths.chunks(steps * 2).enumerate() {
             let (r, g) = spec.gradient(p, &sem).unwrap();
             assert_eq!(rs[b], r);

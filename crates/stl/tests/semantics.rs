@@ -60,12 +60,7 @@ proptest! {
     }
 }
 
-fn check_gradient(
-    f: &Formula,
-    p: &[f64],
-    sem: &Semantics,
-    hard: bool,
-) -> Result<(), TestCaseError> {
+fn check_gradient(f: &Formula, p: &[f64], sem: &Semantics, hard: bool) -> Result<(), TestCaseError> {
     let spec = bind(f.clone());
     let (rho, grad) = spec.gradient(p, sem).unwrap();
     // `true`/`false` are ±1e9: keep finite differences meaningful.
@@ -135,22 +130,13 @@ fn next_clamps_at_the_end() {
 #[test]
 fn eventually_and_globally_windows() {
     let x = [0.0, 4.0, 1.0, 3.0, 9.0];
-    assert_eq!(
-        hard("F[1,3] x > 0", &x),
-        (4.0, vec![0.0, 1.0, 0.0, 0.0, 0.0])
-    );
-    assert_eq!(
-        hard("G[1,3] x > 0", &x),
-        (1.0, vec![0.0, 0.0, 1.0, 0.0, 0.0])
-    );
+    assert_eq!(hard("F[1,3] x > 0", &x), (4.0, vec![0.0, 1.0, 0.0, 0.0, 0.0]));
+    assert_eq!(hard("G[1,3] x > 0", &x), (1.0, vec![0.0, 0.0, 1.0, 0.0, 0.0]));
     assert_eq!(hard("F x > 0", &x).0, 9.0);
     assert_eq!(hard("G[2,inf] x > 0", &x).0, 1.0);
     // A window past the end is cut at the last step; one starting past it is the last step.
     assert_eq!(hard("G[3,10] x > 0", &x).0, 3.0);
-    assert_eq!(
-        hard("F[7,9] x > 0", &x),
-        (9.0, vec![0.0, 0.0, 0.0, 0.0, 1.0])
-    );
+    assert_eq!(hard("F[7,9] x > 0", &x), (9.0, vec![0.0, 0.0, 0.0, 0.0, 1.0]));
 }
 
 #[test]
@@ -162,10 +148,7 @@ fn until_follows_app_c() {
     assert_eq!(r, 2.0);
     assert_eq!(g, vec![0.0, 0.0, 0.0, 1.0, 0.0], "ties go to the ψ side");
     // Starting the window at 0 makes φ_0 = −1 binding for k ≥ 1; ψ_0 = −6.
-    assert_eq!(
-        hard("x > 0 U[0,3] x > 5", &x),
-        (-1.0, vec![1.0, 0.0, 0.0, 0.0, 0.0])
-    );
+    assert_eq!(hard("x > 0 U[0,3] x > 5", &x), (-1.0, vec![1.0, 0.0, 0.0, 0.0, 0.0]));
     // The soft modes agree with the definitions on the same example.
     let spec = common::bind(parse("x > 0 U[1,3] x > 5").unwrap());
     for sem in [Semantics::soft(2.0), Semantics::lse(0.5)] {

@@ -93,18 +93,9 @@ fn printer_uses_the_fewest_parentheses() {
     let a = || Formula::atom("a");
     let b = || Formula::atom("b");
     assert_eq!((a() & b()).implies(a() | b()).to_string(), "a & b -> a | b");
-    assert_eq!(
-        Formula::And(vec![Formula::Or(vec![a(), b()]), a()]).to_string(),
-        "(a | b) & a"
-    );
-    assert_eq!(
-        (!(a() & b())).eventually(1, 2).to_string(),
-        "F[1,2] !(a & b)"
-    );
-    assert_eq!(
-        a().until(0, 3, b()).globally_from(1).to_string(),
-        "G[1,inf] (a U[0,3] b)"
-    );
+    assert_eq!(Formula::And(vec![Formula::Or(vec![a(), b()]), a()]).to_string(), "(a | b) & a");
+    assert_eq!((!(a() & b())).eventually(1, 2).to_string(), "F[1,2] !(a & b)");
+    assert_eq!(a().until(0, 3, b()).globally_from(1).to_string(), "G[1,inf] (a U[0,3] b)");
     assert_eq!(a().implies(b()).implies(a()).to_string(), "(a -> b) -> a");
 }
 

@@ -70,11 +70,7 @@ pub fn read_trace(path: &std::path::Path) -> Result<Trace> {
     let mut values = Vec::new();
     for rec in rdr.records() {
         let rec = rec.map_err(|e| match e.kind() {
-            csv::ErrorKind::UnequalLengths {
-                pos,
-                expected_len,
-                len,
-            } => anyhow::anyhow!(
+            csv::ErrorKind::UnequalLengths { pos, expected_len, len } => anyhow::anyhow!(
                 "{shown}: line {}: {len} fields, but the header has {expected_len}",
                 pos.as_ref().map_or(0, |p| p.line())
             ),
@@ -82,15 +78,9 @@ pub fn read_trace(path: &std::path::Path) -> Result<Trace> {
         })?;
         let line = rec.position().map_or(0, |p| p.line());
         for (field, name) in rec.iter().zip(&names) {
-            let v: f64 = field
-                .parse()
-                .ok()
-                .filter(|v: &f64| v.is_finite())
-                .with_context(|| {
-                    format!(
-                        "{shown}: line {line}, column '{name}': '{field}' is not a finite number"
-                    )
-                })?;
+            let v: f64 = field.parse().ok().filter(|v: &f64| v.is_finite()).with_context(|| {
+                format!("{shown}: line {line}, column '{name}': '{field}' is not a finite number")
+            })?;
             values.push(v);
         }
     }
@@ -105,10 +95,7 @@ pub fn run(args: Args) -> Result<()> {
     let text = SpecText::load(&args.spec)?;
     let formula = text.parse()?;
     let trace = read_trace(&args.trace)?;
-    let spec = Spec::builder(formula)
-        .signals(trace.names.clone())
-        .build()
-        .map_err(|e| text.explain(e))?;
+    let spec = Spec::builder(formula).signals(trace.names.clone()).build().map_err(|e| text.explain(e))?;
     let mut sem = args.semantics;
     if args.smooth_logic_only {
         sem = sem.logic_only();
@@ -128,8 +115,7 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 fn write_gradient(path: &std::path::Path, names: &[String], grad: &[f64]) -> Result<()> {
-    let mut w =
-        csv::Writer::from_path(path).with_context(|| format!("cannot write {}", path.display()))?;
+    let mut w = csv::Writer::from_path(path).with_context(|| format!("cannot write {}", path.display()))?;
     w.write_record(names)?;
     for row in grad.chunks(names.len()) {
         w.write_record(row.iter().map(|g| g.to_string()))?;

@@ -21,15 +21,9 @@ impl SpecText {
                 let path = PathBuf::from(path);
                 let text = std::fs::read_to_string(&path)
                     .with_context(|| format!("cannot read spec file {}", path.display()))?;
-                Ok(Self {
-                    text,
-                    origin: Some(path),
-                })
+                Ok(Self { text, origin: Some(path) })
             }
-            None => Ok(Self {
-                text: arg.to_string(),
-                origin: None,
-            }),
+            None => Ok(Self { text: arg.to_string(), origin: None }),
         }
     }
 

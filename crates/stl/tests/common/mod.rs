@@ -14,22 +14,14 @@ pub fn bind(f: Formula) -> Spec {
         .signals(SIGNALS)
         .bind("a", Ball::new([1.0, 0.0], 0.5))
         .bind("b", Ball::new([0.0, 1.0], 0.7))
-        .bind(
-            "c",
-            Halfspace {
-                normal: vec![1.0, -0.5],
-                bound: 0.2,
-            },
-        )
+        .bind("c", Halfspace { normal: vec![1.0, -0.5], bound: 0.2 })
         .build()
         .expect("all names bound")
 }
 
 fn interval() -> impl Strategy<Value = Interval> {
-    (0usize..4, prop::option::of(0usize..6)).prop_map(|(a, len)| Interval {
-        start: a,
-        end: len.map(|l| a + l),
-    })
+    (0usize..4, prop::option::of(0usize..6))
+        .prop_map(|(a, len)| Interval { start: a, end: len.map(|l| a + l) })
 }
 
 fn leaf() -> impl Strategy<Value = Formula> {
@@ -85,29 +77,18 @@ pub fn semantics() -> impl Strategy<Value = Semantics> {
 fn agg(sm: Smoothing, max: bool, v: &[f64]) -> f64 {
     let s = if max { 1.0 } else { -1.0 };
     match sm {
-        Smoothing::Hard => v.iter().copied().fold(
-            if max {
-                f64::NEG_INFINITY
-            } else {
-                f64::INFINITY
-            },
-            |m, x| {
+        Smoothing::Hard => {
+            v.iter().copied().fold(if max { f64::NEG_INFINITY } else { f64::INFINITY }, |m, x| {
                 if max { m.max(x) } else { m.min(x) }
-            },
-        ),
+            })
+        }
         Smoothing::Soft { alpha } => {
-            let m = v
-                .iter()
-                .map(|x| s * alpha * x)
-                .fold(f64::NEG_INFINITY, f64::max);
+            let m = v.iter().map(|x| s * alpha * x).fold(f64::NEG_INFINITY, f64::max);
             let w: Vec<f64> = v.iter().map(|x| (s * alpha * x - m).exp()).collect();
             w.iter().zip(v).map(|(w, x)| w * x).sum::<f64>() / w.iter().sum::<f64>()
         }
         Smoothing::LogSumExp { temperature } => {
-            let m = v
-                .iter()
-                .map(|x| s * x / temperature)
-                .fold(f64::NEG_INFINITY, f64::max);
+            let m = v.iter().map(|x| s * x / temperature).fold(f64::NEG_INFINITY, f64::max);
             let z: f64 = v.iter().map(|x| (s * x / temperature - m).exp()).sum();
             s * temperature * (m + z.ln())
         }
@@ -120,11 +101,7 @@ pub fn reference(f: &Formula, path: &[f64], t: usize, sem: &Semantics) -> f64 {
     let last = n - 1;
     let clamp = |k: usize| k.min(last);
     let logic = sem.smoothing;
-    let temporal = if sem.smooth_temporal {
-        sem.smoothing
-    } else {
-        Smoothing::Hard
-    };
+    let temporal = if sem.smooth_temporal { sem.smoothing } else { Smoothing::Hard };
     let state = &path[2 * clamp(t)..2 * clamp(t) + 2];
     let pred = |name: &str| -> f64 {
         match name {
@@ -145,46 +122,22 @@ pub fn reference(f: &Formula, path: &[f64], t: usize, sem: &Semantics) -> f64 {
         Formula::True => sem.top,
         Formula::False => -sem.top,
         Formula::Atom(n) => pred(n),
-        Formula::Compare {
-            signal,
-            op,
-            threshold,
-        } => op.sign() * (pred(signal) - threshold),
+        Formula::Compare { signal, op, threshold } => op.sign() * (pred(signal) - threshold),
         Formula::Not(g) => -reference(g, path, t, sem),
-        Formula::And(v) => agg(
-            logic,
-            false,
-            &v.iter()
-                .map(|g| reference(g, path, t, sem))
-                .collect::<Vec<_>>(),
-        ),
-        Formula::Or(v) => agg(
-            logic,
-            true,
-            &v.iter()
-                .map(|g| reference(g, path, t, sem))
-                .collect::<Vec<_>>(),
-        ),
-        Formula::Implies(l, r) => agg(
-            logic,
-            true,
-            &[-reference(l, path, t, sem), reference(r, path, t, sem)],
-        ),
+        Formula::And(v) => {
+            agg(logic, false, &v.iter().map(|g| reference(g, path, t, sem)).collect::<Vec<_>>())
+        }
+        Formula::Or(v) => agg(logic, true, &v.iter().map(|g| reference(g, path, t, sem)).collect::<Vec<_>>()),
+        Formula::Implies(l, r) => {
+            agg(logic, true, &[-reference(l, path, t, sem), reference(r, path, t, sem)])
+        }
         Formula::Next(g) => reference(g, path, clamp(t + 1), sem),
-        Formula::Eventually(i, g) => agg(
-            temporal,
-            true,
-            &window(i)
-                .map(|k| reference(g, path, k, sem))
-                .collect::<Vec<_>>(),
-        ),
-        Formula::Globally(i, g) => agg(
-            temporal,
-            false,
-            &window(i)
-                .map(|k| reference(g, path, k, sem))
-                .collect::<Vec<_>>(),
-        ),
+        Formula::Eventually(i, g) => {
+            agg(temporal, true, &window(i).map(|k| reference(g, path, k, sem)).collect::<Vec<_>>())
+        }
+        Formula::Globally(i, g) => {
+            agg(temporal, false, &window(i).map(|k| reference(g, path, k, sem)).collect::<Vec<_>>())
+        }
         Formula::Until(i, l, r) => {
             let w = window(i);
             let lo = *w.start();

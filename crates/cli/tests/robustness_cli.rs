@@ -1,0 +1,100 @@
+//! `schrl robustness` end to end: output format and error handling.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn schrl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_schrl")).args(args).output().expect("runs")
+}
+
+fn write(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("schrl-cli-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn last_line(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).lines().last().unwrap_or("").to_string()
+}
+
+#[test]
+fn prints_robustness_as_the_last_line() {
+    let trace = write("ok.csv", "x,y\n0,0\n1,0.5\n2,1\n");
+    let t = trace.to_str().unwrap();
+    let o = schrl(&["robustness", "--spec", "F[1,2] x > 1.5 & G y >= -1", "--trace", t]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(last_line(&o), "0.5");
+    let spec = write("spec.stl", "# reach x > 1.5\nF x > 1.5\n");
+    let at = format!("@{}", spec.display());
+    let o = schrl(&["robustness", "--spec", &at, "--trace", t, "--semantics", "lse:0.01"]);
+    let v: f64 = last_line(&o).parse().unwrap();
+    assert!((v - 0.5).abs() < 0.02, "{v}");
+    let o = schrl(&["robustness", "--spec", "F x > 1.5", "--trace", t, "--semantics", "soft:2"]);
+    let v: f64 = last_line(&o).parse().unwrap();
+    assert!(v < 0.5 && v > -1.5, "soft max lies between min and max: {v}");
+}
+
+#[test]
+fn writes_the_gradient() {
+    let trace = write("g.csv", "x,y\n0,0\n3,0\n1,0\n");
+    let grad = trace.with_file_name("grad.csv");
+    let o = schrl(&[
+        "robustness",
+        "--spec",
+        "F x > 1",
+        "--trace",
+        trace.to_str().unwrap(),
+        "--gradient",
+        grad.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    assert_eq!(std::fs::read_to_string(grad).unwrap(), "x,y\n0,0\n1,0\n0,0\n");
+}
+
+fn fails_with(args: &[&str], needle: &str) {
+    let o = schrl(args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "should fail: {args:?}");
+    assert!(err.contains(needle), "stderr lacks '{needle}':\n{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn bad_input_is_a_clear_error() {
+    let ok = write("ok2.csv", "x,y\n0,0\n1,1\n");
+    let ok = ok.to_str().unwrap();
+    fails_with(
+        &["robustness", "--spec", "F[1,2] (x > 1 &", "--trace", ok],
+        "line 1, column 16: expected a formula",
+    );
+    fails_with(&["robustness", "--spec", "F goal", "--trace", ok], "line 1, column 3: 'goal' is not bound");
+    fails_with(
+        &["robustness", "--spec", "F x > 1", "--trace", ok, "--semantics", "soft:-1"],
+        "alpha must be",
+    );
+    fails_with(
+        &["robustness", "--spec", "F x > 1", "--trace", ok, "--semantics", "fuzzy"],
+        "unknown semantics",
+    );
+    let ragged = write("ragged.csv", "x,y\n1,2\n3\n");
+    fails_with(
+        &["robustness", "--spec", "F x > 1", "--trace", ragged.to_str().unwrap()],
+        "line 3: 1 fields, but the header has 2",
+    );
+    let nonnum = write("nonnum.csv", "x,y\n1,2\n3,abc\n");
+    fails_with(
+        &["robustness", "--spec", "F x > 1", "--trace", nonnum.to_str().unwrap()],
+        "line 3, column 'y': 'abc' is not a finite number",
+    );
+    let empty = write("empty.csv", "x,y\n");
+    fails_with(&["robustness", "--spec", "F x > 1", "--trace", empty.to_str().unwrap()], "no rows");
+    let badname = write("badname.csv", "x,my y\n1,2\n");
+    fails_with(
+        &["robustness", "--spec", "F x > 1", "--trace", badname.to_str().unwrap()],
+        "not a valid signal name",
+    );
+    fails_with(&["robustness", "--spec", "F x > 1", "--trace", "/nonexistent/t.csv"], "cannot read trace");
+    fails_with(&["robustness", "--spec", "@/nonexistent/s.stl", "--trace", ok], "cannot read spec file");
+}
