@@ -1,0 +1,413 @@
+//! The goal-conditioned environment API, shaped like Gymnasium's.
+//!
+//! An environment holds one robot on one map and a current goal in plan space
+//! (x, y for ground robots; x, y, z for the Drone). Each step applies an action and
+//! reports the reward, whether the goal was reached, whether the robot collided, and
+//! whether the step limit truncated the episode.
+//!
+//! Reward (paper §3.3, reference setup): the decrease of the distance to the goal
+//! over the step, `‖g − x_{t−1}‖ − ‖g − x_t‖`, plus 20 on the step the robot first
+//! comes within the robot's reach radius of the goal (0.3 m for ground robots, 0.6 m
+//! for the Drone). A goal is reached once: until [`Env::set_goal`] gives a new one,
+//! later steps earn only the distance term. Observations are written into a
+//! caller's buffer so that stepping allocates nothing.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::map::Map;
+
+/// Bonus for reaching the goal (reference setup: "+20 on reaching it").
+pub const REACH_BONUS: f64 = 20.0;
+
+/// Default step limit of an episode (the Seq/Cover tasks' limit for ground robots).
+pub const DEFAULT_MAX_STEPS: usize = 1000;
+
+/// A box of real vectors: per-dimension bounds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoxSpace {
+    /// Lower bounds.
+    pub low: Vec<f64>,
+    /// Upper bounds.
+    pub high: Vec<f64>,
+}
+
+impl BoxSpace {
+    /// The box `[low, high]`.
+    pub fn new(low: Vec<f64>, high: Vec<f64>) -> Self {
+        assert_eq!(low.len(), high.len(), "bounds of equal length");
+        Self { low, high }
+    }
+
+    /// Number of dimensions.
+    pub fn dim(&self) -> usize {
+        self.low.len()
+    }
+
+    /// `true` if `x` lies in the box.
+    pub fn contains(&self, x: &[f64]) -> bool {
+        x.len() == self.dim() && x.iter().zip(&self.low).zip(&self.high).all(|((v, l), h)| v >= l && v <= h)
+    }
+}
+
+/// What one step reports (the observation goes to the caller's buffer).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Step {
+    /// Decrease of distance to the goal, plus the reach bonus.
+    pub reward: f64,
+    /// The robot came within the reach radius of the goal on this step.
+    pub reached: bool,
+    /// The robot touched an obstacle (wall, floor, duck) during this step.
+    pub collided: bool,
+    /// The episode hit its step limit.
+    pub truncated: bool,
+}
+
+/// Invalid input to an environment. The environment's state is unchanged.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EnvError {
+    /// An action of the wrong length.
+    #[error("{robot}: action has {got} numbers, expected {expected}")]
+    ActionLength {
+        /// Robot name.
+        robot: &'static str,
+        /// Expected length.
+        expected: usize,
+        /// Given length.
+        got: usize,
+    },
+    /// NaN or an infinity in an action.
+    #[error("{robot}: action[{index}] is {value}, actions must be finite")]
+    NonFiniteAction {
+        /// Robot name.
+        robot: &'static str,
+        /// Position in the action.
+        index: usize,
+        /// The value.
+        value: f64,
+    },
+    /// A goal or start position of the wrong length or with non-finite numbers.
+    #[error("{what} must be {expected} finite numbers (the plan space of {robot}), got {got:?}")]
+    BadPoint {
+        /// "goal" or "start".
+        what: &'static str,
+        /// Robot name.
+        robot: &'static str,
+        /// Plan-space dimension.
+        expected: usize,
+        /// What was given.
+        got: Vec<f64>,
+    },
+    /// A start position inside or too close to an obstacle.
+    #[error("start {start:?} is inside or within {clearance} m of an obstacle on the {map} map")]
+    StartBlocked {
+        /// The start.
+        start: Vec<f64>,
+        /// Map name.
+        map: &'static str,
+        /// Required clearance.
+        clearance: f64,
+    },
+    /// An observation buffer of the wrong length.
+    #[error("observation buffer has {got} numbers, expected {expected}")]
+    ObservationLength {
+        /// Expected length.
+        expected: usize,
+        /// Given length.
+        got: usize,
+    },
+    /// An unknown robot name.
+    #[error("unknown robot '{0}': expected one of point, car, drone (doggo needs the `mujoco` feature)")]
+    UnknownRobot(String),
+    /// An unknown map name.
+    #[error("unknown map '{0}': expected one of walls, empty, duck")]
+    UnknownMap(String),
+    /// A robot on a map of the wrong dimension.
+    #[error("the {robot} needs a {needs}-D map, but '{map}' is {has}-D")]
+    MapMismatch {
+        /// Robot name.
+        robot: &'static str,
+        /// Map name.
+        map: &'static str,
+        /// Dimension the robot needs.
+        needs: usize,
+        /// The map's dimension.
+        has: usize,
+    },
+}
+
+/// A goal-conditioned environment (object safe, so robots can be chosen at run time).
+pub trait Env: Send {
+    /// The robot's name.
+    fn robot_name(&self) -> &'static str;
+    /// The map.
+    fn map(&self) -> &Map;
+    /// Bounds of observations (informative; sensors may exceed them in crashes).
+    fn observation_space(&self) -> &BoxSpace;
+    /// Bounds of actions; actions outside are clipped.
+    fn action_space(&self) -> &BoxSpace;
+    /// Plan-space dimension (2 or 3).
+    fn plan_dim(&self) -> usize;
+    /// Reach radius of a goal.
+    fn reach_radius(&self) -> f64;
+    /// Starts an episode: the robot at `start` (or a random free position), random
+    /// heading, a random free goal; writes the first observation.
+    fn reset_into(&mut self, seed: u64, start: Option<&[f64]>, obs: &mut [f64]) -> Result<(), EnvError>;
+    /// Applies `action` for one control step and writes the next observation.
+    fn step_into(&mut self, action: &[f64], obs: &mut [f64]) -> Result<Step, EnvError>;
+    /// Sets the goal (plan space); the next reach counts again.
+    fn set_goal(&mut self, goal: &[f64]) -> Result<(), EnvError>;
+    /// The current goal.
+    fn goal(&self) -> &[f64];
+    /// The robot's position in plan space.
+    fn position(&self) -> &[f64];
+    /// Writes the current observation.
+    fn observe(&self, obs: &mut [f64]);
+    /// Steps taken in this episode.
+    fn steps(&self) -> usize;
+    /// Sets the step limit.
+    fn set_max_steps(&mut self, max_steps: usize);
+    /// A random free goal from the environment's generator (used by trainers).
+    fn sample_goal(&mut self) -> Vec<f64>;
+
+    /// [`Env::reset_into`], returning the observation.
+    fn reset(&mut self, seed: u64, start: Option<&[f64]>) -> Result<Vec<f64>, EnvError> {
+        let mut obs = vec![0.0; self.observation_space().dim()];
+        self.reset_into(seed, start, &mut obs)?;
+        Ok(obs)
+    }
+
+    /// [`Env::step_into`], returning the observation.
+    fn step(&mut self, action: &[f64]) -> Result<(Vec<f64>, Step), EnvError> {
+        let mut obs = vec![0.0; self.observation_space().dim()];
+        let s = self.step_into(action, &mut obs)?;
+        Ok((obs, s))
+    }
+}
+
+/// A robot's equations of motion and sensors, wrapped by [`GoalEnv`].
+pub trait Dynamics: Send + Clone {
+    /// Robot name.
+    const NAME: &'static str;
+    /// Observation length.
+    const OBS_DIM: usize;
+    /// Action length.
+    const ACT_DIM: usize;
+    /// Plan-space dimension.
+    const PLAN_DIM: usize;
+    /// Goal reach radius.
+    const REACH_RADIUS: f64;
+    /// Radius of the robot's collision shape.
+    const RADIUS: f64;
+    /// Action bounds.
+    fn action_space() -> BoxSpace;
+    /// Observation bounds.
+    fn observation_space() -> BoxSpace;
+    /// Puts the robot at rest at `start` (plan space) with a heading from `rng`.
+    fn reset(&mut self, start: &[f64], rng: &mut ChaCha8Rng);
+    /// Advances one control step under `action` (already clipped); returns whether
+    /// the robot touched an obstacle.
+    fn advance(&mut self, action: &[f64], map: &Map, goal: &[f64]) -> bool;
+    /// Position in plan space.
+    fn plan_position(&self) -> &[f64];
+    /// Writes the observation for `goal`.
+    fn observe(&self, goal: &[f64], obs: &mut [f64]);
+}
+
+/// A robot with goal, reward and episode bookkeeping: the [`Env`] for every robot.
+#[derive(Clone)]
+pub struct GoalEnv<D: Dynamics> {
+    robot: D,
+    map: Map,
+    goal: Vec<f64>,
+    prev_dist: f64,
+    goal_reached: bool,
+    steps: usize,
+    max_steps: usize,
+    rng: ChaCha8Rng,
+    obs_space: BoxSpace,
+    act_space: BoxSpace,
+}
+
+impl<D: Dynamics> GoalEnv<D> {
+    /// The robot on `map`, reset with seed 0.
+    pub fn new(robot: D, map: Map) -> Result<Self, EnvError> {
+        if map.dim() != D::PLAN_DIM {
+            return Err(EnvError::MapMismatch {
+                robot: D::NAME,
+                map: map.name(),
+                needs: D::PLAN_DIM,
+                has: map.dim(),
+            });
+        }
+        let mut env = Self {
+            robot,
+            map,
+            goal: vec![0.0; D::PLAN_DIM],
+            prev_dist: 0.0,
+            goal_reached: false,
+            steps: 0,
+            max_steps: DEFAULT_MAX_STEPS,
+            rng: ChaCha8Rng::seed_from_u64(0),
+            obs_space: D::observation_space(),
+            act_space: D::action_space(),
+        };
+        let mut obs = vec![0.0; D::OBS_DIM];
+        env.reset_into(0, None, &mut obs)?;
+        Ok(env)
+    }
+
+    /// The robot's dynamics (for tests and rendering).
+    pub fn dynamics(&self) -> &D {
+        &self.robot
+    }
+
+    /// Mutable access to the dynamics (for tests that set a state).
+    pub fn dynamics_mut(&mut self) -> &mut D {
+        &mut self.robot
+    }
+
+    fn clearance() -> f64 {
+        D::RADIUS + 0.1
+    }
+
+    fn free_point(&mut self) -> Vec<f64> {
+        let (lo, hi) = self.map.region();
+        loop {
+            let p: Vec<f64> = lo.iter().zip(&hi).map(|(l, h)| self.rng.random_range(*l..*h)).collect();
+            if self.map.sdf(&p) > Self::clearance() {
+                return p;
+            }
+        }
+    }
+
+    fn check_point(what: &'static str, p: &[f64]) -> Result<(), EnvError> {
+        if p.len() != D::PLAN_DIM || p.iter().any(|v| !v.is_finite()) {
+            return Err(EnvError::BadPoint { what, robot: D::NAME, expected: D::PLAN_DIM, got: p.to_vec() });
+        }
+        Ok(())
+    }
+
+    fn distance(&self) -> f64 {
+        let p = self.robot.plan_position();
+        p.iter().zip(&self.goal).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt()
+    }
+
+    fn check_obs(obs: &[f64]) -> Result<(), EnvError> {
+        if obs.len() != D::OBS_DIM {
+            return Err(EnvError::ObservationLength { expected: D::OBS_DIM, got: obs.len() });
+        }
+        Ok(())
+    }
+}
+
+impl<D: Dynamics> Env for GoalEnv<D> {
+    fn robot_name(&self) -> &'static str {
+        D::NAME
+    }
+
+    fn map(&self) -> &Map {
+        &self.map
+    }
+
+    fn observation_space(&self) -> &BoxSpace {
+        &self.obs_space
+    }
+
+    fn action_space(&self) -> &BoxSpace {
+        &self.act_space
+    }
+
+    fn plan_dim(&self) -> usize {
+        D::PLAN_DIM
+    }
+
+    fn reach_radius(&self) -> f64 {
+        D::REACH_RADIUS
+    }
+
+    fn reset_into(&mut self, seed: u64, start: Option<&[f64]>, obs: &mut [f64]) -> Result<(), EnvError> {
+        Self::check_obs(obs)?;
+        if let Some(s) = start {
+            Self::check_point("start", s)?;
+            if self.map.sdf(s) <= D::RADIUS {
+                return Err(EnvError::StartBlocked {
+                    start: s.to_vec(),
+                    map: self.map.name(),
+                    clearance: D::RADIUS,
+                });
+            }
+        }
+        self.rng = ChaCha8Rng::seed_from_u64(seed);
+        let start = match start {
+            Some(s) => s.to_vec(),
+            None => self.free_point(),
+        };
+        self.robot.reset(&start, &mut self.rng);
+        self.goal = self.free_point();
+        self.goal_reached = false;
+        self.prev_dist = self.distance();
+        self.steps = 0;
+        self.robot.observe(&self.goal, obs);
+        Ok(())
+    }
+
+    fn step_into(&mut self, action: &[f64], obs: &mut [f64]) -> Result<Step, EnvError> {
+        if action.len() != D::ACT_DIM {
+            return Err(EnvError::ActionLength { robot: D::NAME, expected: D::ACT_DIM, got: action.len() });
+        }
+        if let Some((index, &value)) = action.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(EnvError::NonFiniteAction { robot: D::NAME, index, value });
+        }
+        Self::check_obs(obs)?;
+        let mut a = [0.0; 32];
+        let a = &mut a[..D::ACT_DIM];
+        for (i, (o, v)) in a.iter_mut().zip(action).enumerate() {
+            *o = v.clamp(self.act_space.low[i], self.act_space.high[i]);
+        }
+        let collided = self.robot.advance(a, &self.map, &self.goal);
+        self.steps += 1;
+        let dist = self.distance();
+        let mut reward = self.prev_dist - dist;
+        self.prev_dist = dist;
+        let reached = !self.goal_reached && dist <= D::REACH_RADIUS;
+        if reached {
+            self.goal_reached = true;
+            reward += REACH_BONUS;
+        }
+        self.robot.observe(&self.goal, obs);
+        Ok(Step { reward, reached, collided, truncated: self.steps >= self.max_steps })
+    }
+
+    fn set_goal(&mut self, goal: &[f64]) -> Result<(), EnvError> {
+        Self::check_point("goal", goal)?;
+        self.goal.copy_from_slice(goal);
+        self.goal_reached = false;
+        self.prev_dist = self.distance();
+        Ok(())
+    }
+
+    fn goal(&self) -> &[f64] {
+        &self.goal
+    }
+
+    fn position(&self) -> &[f64] {
+        self.robot.plan_position()
+    }
+
+    fn observe(&self, obs: &mut [f64]) {
+        self.robot.observe(&self.goal, obs);
+    }
+
+    fn steps(&self) -> usize {
+        self.steps
+    }
+
+    fn set_max_steps(&mut self, max_steps: usize) {
+        self.max_steps = max_steps;
+    }
+
+    fn sample_goal(&mut self) -> Vec<f64> {
+        self.free_point()
+    }
+}

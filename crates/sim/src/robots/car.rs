@@ -1,0 +1,236 @@
+//! Car: Safety Gym's differential-drive robot (reference setup; Safety-Gymnasium
+//! `car.xml`).
+//!
+//! A 0.2 × 0.2 × 0.1 m box chassis on two driven wheels (radius 0.05 m, 0.13 m either
+//! side, 0.1 m behind the centre) and a passive ball caster 0.1 m ahead. In this
+//! model's frame x points forward (the XML's −y, where the front bumper is).
+//!
+//! * Each wheel is driven by a motor, torque `clamp(a_i, ±0.02)` N·m (gear 1,
+//!   `forcerange` ±0.02); `action = [left, right]` in [−1, 1].
+//! * Wheels are massless in the plane of motion (their inertia, 2.5e-6 kg·m², is
+//!   four orders below the car's): a rolling wheel passes `(τ − c_w Ω)/r` to the
+//!   ground; when that exceeds Coulomb friction `μ N` the wheel spins and slips and
+//!   the ground force is `μ N`. Sideways, the wheels resist slip with friction
+//!   impulses bounded by the friction left over (a velocity-level contact solve), so
+//!   the car skids when turned hard.
+//! * The caster rolls freely; its ball-joint damping makes a rolling drag
+//!   `c_c v / r²`.
+//!
+//! | parameter | value | source |
+//! |---|---|---|
+//! | physics step | 0.004 s, 10 per control step | reference setup |
+//! | mass | 0.0304 kg (density 5, all geoms) | car.xml |
+//! | yaw inertia | 3.44e-4 kg·m² | car.xml geometry |
+//! | wheel / caster joint damping | 0.001 | car.xml default |
+//! | friction μ | 1 | MuJoCo default |
+//! | loads | m g / 4 per wheel, m g / 2 caster | static balance of the layout |
+//! | collision shape | disc of radius 0.2 m (chassis with bumpers) | car.xml geometry |
+//! | reach radius | 0.3 m | reference setup |
+//!
+//! Observation (26): accelerometer, velocimeter, gyro, magnetometer (3 each, robot
+//! frame), the caster ball's orientation relative to the chassis (3 × 3, row-major)
+//! and its angular velocity in the chassis frame (3), then the goal vector in the
+//! robot frame (2).
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::contact;
+use crate::env::{BoxSpace, Dynamics};
+use crate::map::Map;
+use crate::robots::{GRAVITY, Heading, MAGNETIC_FIELD};
+use crate::rotation::{Quat, apply_t};
+
+const DT: f64 = 0.004;
+const SUBSTEPS: usize = 10;
+const MASS: f64 = 0.030_445;
+const INERTIA: f64 = 3.44e-4;
+const WHEEL_RADIUS: f64 = 0.05;
+const WHEEL_Y: f64 = 0.13;
+const WHEEL_X: f64 = -0.1;
+const CASTER_X: f64 = 0.1;
+const CASTER_RADIUS: f64 = 0.05;
+const MOTOR_LIMIT: f64 = 0.02;
+const WHEEL_DAMPING: f64 = 0.001;
+const CASTER_DAMPING: f64 = 0.001;
+const MU: f64 = 1.0;
+const WHEEL_LOAD: f64 = MASS * GRAVITY / 4.0;
+const CASTER_LOAD: f64 = MASS * GRAVITY / 2.0;
+const RADIUS: f64 = 0.2;
+/// Most the car can accelerate (m/s²): all friction forward.
+const MAX_ACCEL: f64 = MU * GRAVITY;
+
+/// The Car's state.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Car {
+    /// Position (m).
+    pub pos: [f64; 2],
+    /// Velocity (m/s, world frame).
+    pub vel: [f64; 2],
+    /// Heading (forward axis).
+    pub heading: Heading,
+    /// Yaw rate (rad/s).
+    pub yaw_rate: f64,
+    /// Wheel spin rates (rad/s), left and right.
+    pub wheel_speed: [f64; 2],
+    /// The caster ball's orientation in the world.
+    pub caster: Quat,
+    /// The caster ball's angular velocity (world frame, rad/s).
+    pub caster_rate: [f64; 3],
+    /// Acceleration over the last physics step (world frame).
+    pub accel: [f64; 2],
+}
+
+impl Default for Car {
+    fn default() -> Self {
+        Self {
+            pos: [0.0; 2],
+            vel: [0.0; 2],
+            heading: Heading::new(0.0),
+            yaw_rate: 0.0,
+            wheel_speed: [0.0; 2],
+            caster: Quat::IDENTITY,
+            caster_rate: [0.0; 3],
+            accel: [0.0; 2],
+        }
+    }
+}
+
+impl Car {
+    fn substep(&mut self, torque: [f64; 2]) {
+        let [mut u, mut l] = self.heading.to_body(self.vel);
+        let mut w = self.yaw_rate;
+        let old = self.vel;
+        // Traction of each wheel (left at +y, right at −y).
+        let mut long = [0.0; 2];
+        for (i, y) in [WHEEL_Y, -WHEEL_Y].into_iter().enumerate() {
+            let v_long = u - w * y;
+            let rolling = (torque[i] - WHEEL_DAMPING * v_long / WHEEL_RADIUS) / WHEEL_RADIUS;
+            if rolling.abs() <= MU * WHEEL_LOAD {
+                long[i] = rolling;
+                self.wheel_speed[i] = v_long / WHEEL_RADIUS;
+            } else {
+                long[i] = MU * WHEEL_LOAD * rolling.signum();
+                self.wheel_speed[i] = (torque[i] - WHEEL_RADIUS * long[i]) / WHEEL_DAMPING;
+            }
+        }
+        // Caster rolling drag, bounded by its friction.
+        let (cu, cl) = (u, l + w * CASTER_X);
+        let drag = CASTER_DAMPING / (CASTER_RADIUS * CASTER_RADIUS);
+        let cap = (MU * CASTER_LOAD / (drag * cu.hypot(cl)).max(1e-12)).min(1.0);
+        let (fcu, fcl) = (-drag * cu * cap, -drag * cl * cap);
+        // Explicit update with the traction and drag forces.
+        let fx = long[0] + long[1] + fcu;
+        let tau = -WHEEL_Y * long[0] + WHEEL_Y * long[1] + CASTER_X * fcl;
+        u += DT * fx / MASS;
+        l += DT * fcl / MASS;
+        w += DT * tau / INERTIA;
+        // Sideways friction at the wheels: impulses that stop lateral slip, within the
+        // friction each wheel has left after traction (two Gauss–Seidel sweeps).
+        let k_lat = 1.0 / (1.0 / MASS + WHEEL_X * WHEEL_X / INERTIA);
+        for _ in 0..2 {
+            for f in long {
+                let v_lat = l + w * WHEEL_X;
+                let limit = ((MU * WHEEL_LOAD).powi(2) - f * f).max(0.0).sqrt() * DT;
+                let j = (-v_lat * k_lat).clamp(-limit, limit);
+                l += j / MASS;
+                w += WHEEL_X * j / INERTIA;
+            }
+        }
+        self.vel = self.heading.to_world([u, l]);
+        self.yaw_rate = w;
+        for i in 0..2 {
+            self.accel[i] = (self.vel[i] - old[i]) / DT;
+        }
+        self.heading.rotate(w * DT);
+        self.pos[0] += DT * self.vel[0];
+        self.pos[1] += DT * self.vel[1];
+    }
+}
+
+impl Dynamics for Car {
+    const NAME: &'static str = "car";
+    const OBS_DIM: usize = 26;
+    const ACT_DIM: usize = 2;
+    const PLAN_DIM: usize = 2;
+    const REACH_RADIUS: f64 = 0.3;
+    const RADIUS: f64 = RADIUS;
+
+    fn action_space() -> BoxSpace {
+        BoxSpace::new(vec![-1.0; 2], vec![1.0; 2])
+    }
+
+    fn observation_space() -> BoxSpace {
+        BoxSpace::new(vec![f64::NEG_INFINITY; 26], vec![f64::INFINITY; 26])
+    }
+
+    fn reset(&mut self, start: &[f64], rng: &mut ChaCha8Rng) {
+        let yaw = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
+        *self = Car {
+            pos: [start[0], start[1]],
+            heading: Heading::new(yaw),
+            caster: Quat::from_yaw(yaw),
+            ..Car::default()
+        };
+    }
+
+    fn advance(&mut self, action: &[f64], map: &Map, _goal: &[f64]) -> bool {
+        let torque = [action[0].clamp(-MOTOR_LIMIT, MOTOR_LIMIT), action[1].clamp(-MOTOR_LIMIT, MOTOR_LIMIT)];
+        let t = DT * SUBSTEPS as f64;
+        let speed = self.vel[0].hypot(self.vel[1]);
+        let check = contact::needs_checks(map, &self.pos, RADIUS, speed * t + 0.5 * MAX_ACCEL * t * t + 1e-3);
+        let mut collided = false;
+        for _ in 0..SUBSTEPS {
+            self.substep(torque);
+            if check {
+                collided |= contact::resolve(map, &mut self.pos, &mut self.vel, RADIUS);
+            }
+        }
+        self.heading.normalize();
+        // The caster rolls without slipping under its contact point's velocity.
+        let [vx, vy] = self.vel;
+        let [ox, oy] = self.heading.to_world([0.0, self.yaw_rate * CASTER_X]);
+        let (cx, cy) = (vx + ox, vy + oy);
+        self.caster_rate = [-cy / CASTER_RADIUS, cx / CASTER_RADIUS, self.yaw_rate];
+        self.caster.integrate_world(self.caster_rate, t);
+        collided
+    }
+
+    fn plan_position(&self) -> &[f64] {
+        &self.pos
+    }
+
+    fn observe(&self, goal: &[f64], obs: &mut [f64]) {
+        let h = &self.heading;
+        let [ax, ay] = h.to_body(self.accel);
+        let [vx, vy] = h.to_body(self.vel);
+        let [mx, my] = h.to_body([MAGNETIC_FIELD[0], MAGNETIC_FIELD[1]]);
+        let [gx, gy] = h.to_body([goal[0] - self.pos[0], goal[1] - self.pos[1]]);
+        obs[..12].copy_from_slice(&[
+            ax,
+            ay,
+            GRAVITY,
+            vx,
+            vy,
+            0.0,
+            0.0,
+            0.0,
+            self.yaw_rate,
+            mx,
+            my,
+            MAGNETIC_FIELD[2],
+        ]);
+        // Caster relative to the chassis: R_chassisᵀ R_ball, and its rate in the chassis frame.
+        let chassis = Quat::from_yaw(h.angle());
+        let rel = Quat { w: chassis.w, v: [-chassis.v[0], -chassis.v[1], -chassis.v[2]] }
+            .mul(&self.caster)
+            .matrix();
+        for (i, row) in rel.iter().enumerate() {
+            obs[12 + 3 * i..15 + 3 * i].copy_from_slice(row);
+        }
+        let r = [[h.dir()[0], -h.dir()[1], 0.0], [h.dir()[1], h.dir()[0], 0.0], [0.0, 0.0, 1.0]];
+        let rate = [self.caster_rate[0], self.caster_rate[1], self.caster_rate[2] - self.yaw_rate];
+        obs[21..24].copy_from_slice(&apply_t(&r, rate));
+        obs[24..26].copy_from_slice(&[gx, gy]);
+    }
+}

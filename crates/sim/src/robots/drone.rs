@@ -1,0 +1,269 @@
+//! Drone: a 6-DoF quadrotor flown by a cascaded PID controller whose gains the
+//! policy adjusts (paper §4.1 "PyBullet Drone"; reference setup).
+//!
+//! The rigid body is the "hb" quadrotor of gym-pybullet-drones: mass 0.5 kg,
+//! inertia diag(2.3e-3, 2.3e-3, 4.0e-3) kg·m², four rotors in a "+" layout at arm
+//! 0.175 m, rotor force `k_f ω²` and drag torque `k_m ω²` (ω in RPM), k_f = 6.11e-8,
+//! k_m = 1.5e-9, thrust-to-weight 2 (each rotor at most `2 m g / 4`), gravity 9.8.
+//! No aerodynamic drag or ground effect is modelled.
+//!
+//! Control at 50 Hz: the position loop (PID on the error to the current goal, plus
+//! gravity compensation) sets the desired force; its direction, with roll and
+//! pitch limited to 30° and yaw held at 0, sets the desired attitude and its
+//! projection on the body z axis the collective thrust. The attitude loop (PID on
+//! the rotation error `½ vee(R_dᵀR − RᵀR_d)` and the body rates) runs at every
+//! physics step (250 Hz), as flight controllers run attitude faster than position;
+//! rotor forces come from inverting the mixer and are clipped to [0, max].
+//!
+//! The 18-dimensional action scales the controller's gains: force P, I, D and
+//! torque P, I, D, three axes each, `gain = base · 2^a` with `a ∈ [−1, 1]` (so each
+//! gain ranges over half to twice its base). Base gains (reference setup): force P
+//! (0.1, 0.1, 0.2), I 1e-4, D (0.3, 0.3, 0.4); torque P (0.3, 0.3, 0.05), D (0.3, 0.3,
+//! 0.5); the reference omits the torque I gain, taken here as 1e-4 like the force I.
+//!
+//! The collision shape is a sphere of radius 0.2 m (arms plus rotors). Reach radius
+//! 0.6 m (reference setup). Observation (18), body frame: accelerometer (specific
+//! force), velocimeter, gyro, magnetometer, the world's up axis, and the goal
+//! vector, 3 each.
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::contact;
+use crate::env::{BoxSpace, Dynamics};
+use crate::map::Map;
+use crate::robots::MAGNETIC_FIELD;
+use crate::rotation::{Quat, apply, apply_t, cross};
+
+/// Gravity of the reference Drone (m/s²).
+pub const G: f64 = 9.8;
+/// Mass (kg).
+pub const MASS: f64 = 0.5;
+const INERTIA: [f64; 3] = [2.3e-3, 2.3e-3, 4.0e-3];
+const ARM: f64 = 0.175;
+const KF: f64 = 6.11e-8;
+const KM: f64 = 1.5e-9;
+const THRUST_TO_WEIGHT: f64 = 2.0;
+/// Most force one rotor gives (N).
+pub const ROTOR_MAX: f64 = THRUST_TO_WEIGHT * MASS * G / 4.0;
+/// Rotor force that holds the drone in a hover (N).
+pub const HOVER_FORCE: f64 = MASS * G / 4.0;
+const CONTROL_DT: f64 = 0.02;
+const SUBSTEPS: usize = 5;
+const DT: f64 = CONTROL_DT / SUBSTEPS as f64;
+const RADIUS: f64 = 0.2;
+const TILT_LIMIT: f64 = std::f64::consts::PI / 6.0;
+const MAX_ACCEL: f64 = (THRUST_TO_WEIGHT + 1.0) * G;
+const INTEGRAL_LIMIT: f64 = 2.0;
+
+/// Base PID gains: force P, I, D, torque P, I, D (3 axes each).
+pub const BASE_GAINS: [f64; 18] = [
+    0.1, 0.1, 0.2, 1e-4, 1e-4, 1e-4, 0.3, 0.3, 0.4, //
+    0.3, 0.3, 0.05, 1e-4, 1e-4, 1e-4, 0.3, 0.3, 0.5,
+];
+
+/// The Drone's state.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Drone {
+    /// Position (m).
+    pub pos: [f64; 3],
+    /// Velocity (m/s, world).
+    pub vel: [f64; 3],
+    /// Orientation (body to world).
+    pub att: Quat,
+    /// Angular velocity (rad/s, body).
+    pub rate: [f64; 3],
+    /// Integral of the position error.
+    pub pos_integral: [f64; 3],
+    /// Integral of the attitude error.
+    pub att_integral: [f64; 3],
+    /// Acceleration over the last physics step (world).
+    pub accel: [f64; 3],
+    /// The last rotor forces (N).
+    pub rotors: [f64; 4],
+}
+
+impl Default for Drone {
+    fn default() -> Self {
+        Self {
+            pos: [0.0, 0.0, 1.0],
+            vel: [0.0; 3],
+            att: Quat::IDENTITY,
+            rate: [0.0; 3],
+            pos_integral: [0.0; 3],
+            att_integral: [0.0; 3],
+            accel: [0.0; 3],
+            rotors: [HOVER_FORCE; 4],
+        }
+    }
+}
+
+impl Drone {
+    /// One physics step with the given rotor forces (clipped to [0, max]).
+    fn physics(&mut self, rotors: [f64; 4]) {
+        let f = rotors.map(|x| x.clamp(0.0, ROTOR_MAX));
+        self.rotors = f;
+        let thrust = f.iter().sum::<f64>();
+        let torque = [ARM * (f[1] - f[3]), ARM * (f[2] - f[0]), KM / KF * (-f[0] + f[1] - f[2] + f[3])];
+        let r = self.att.matrix();
+        let up = apply(&r, [0.0, 0.0, thrust / MASS]);
+        let old = self.vel;
+        for i in 0..3 {
+            self.vel[i] += DT * (up[i] - if i == 2 { G } else { 0.0 });
+            self.accel[i] = (self.vel[i] - old[i]) / DT;
+            self.pos[i] += DT * self.vel[i];
+        }
+        // Euler's equations in the body frame.
+        let w = self.rate;
+        let iw = [INERTIA[0] * w[0], INERTIA[1] * w[1], INERTIA[2] * w[2]];
+        let gyro = cross(w, iw);
+        for i in 0..3 {
+            self.rate[i] += DT * (torque[i] - gyro[i]) / INERTIA[i];
+        }
+        self.att.integrate_body(self.rate, DT);
+    }
+
+    /// Flies one control step with fixed rotor forces, bypassing the controller (for
+    /// tests: hover, free fall). Returns whether it touched an obstacle.
+    pub fn fly_rotors(&mut self, rotors: [f64; 4], map: &Map) -> bool {
+        let mut hit = false;
+        for _ in 0..SUBSTEPS {
+            self.physics(rotors);
+            hit |= contact::resolve(map, &mut self.pos, &mut self.vel, RADIUS);
+        }
+        hit
+    }
+
+    /// The position loop: desired attitude and collective thrust toward `goal`.
+    fn position_loop(&mut self, gains: &[f64; 18], goal: &[f64]) -> ([[f64; 3]; 3], f64) {
+        let mut force = [0.0; 3];
+        for i in 0..3 {
+            let e = goal[i] - self.pos[i];
+            self.pos_integral[i] =
+                (self.pos_integral[i] + e * CONTROL_DT).clamp(-INTEGRAL_LIMIT, INTEGRAL_LIMIT);
+            force[i] = gains[i] * e + gains[3 + i] * self.pos_integral[i] - gains[6 + i] * self.vel[i];
+        }
+        force[2] += MASS * G;
+        // Limit roll and pitch: the horizontal force may tilt the thrust by ≤ 30°.
+        force[2] = force[2].max(1e-3);
+        let horizontal = force[0].hypot(force[1]);
+        let max_h = force[2] * TILT_LIMIT.tan();
+        if horizontal > max_h {
+            force[0] *= max_h / horizontal;
+            force[1] *= max_h / horizontal;
+        }
+        let norm = (force[0] * force[0] + force[1] * force[1] + force[2] * force[2]).sqrt();
+        let z = force.map(|x| x / norm);
+        // Yaw held at 0: x_c = (1, 0, 0).
+        let y = cross(z, [1.0, 0.0, 0.0]);
+        let yn = (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt();
+        let y = y.map(|v| v / yn);
+        let x = cross(y, z);
+        let desired = [[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]];
+        let body_z = apply(&self.att.matrix(), [0.0, 0.0, 1.0]);
+        let thrust =
+            (force[0] * body_z[0] + force[1] * body_z[1] + force[2] * body_z[2]).clamp(0.0, 4.0 * ROTOR_MAX);
+        (desired, thrust)
+    }
+
+    /// The attitude loop and mixer: rotor forces for the desired attitude.
+    fn attitude_loop(&mut self, gains: &[f64; 18], desired: &[[f64; 3]; 3], thrust: f64) -> [f64; 4] {
+        let r = self.att.matrix();
+        // E = R_dᵀR − RᵀR_d is skew-symmetric; e = ½ vee(E).
+        let mut e = [[0.0; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                let mut s = 0.0;
+                for k in 0..3 {
+                    s += desired[k][i] * r[k][j] - r[k][i] * desired[k][j];
+                }
+                e[i][j] = s;
+            }
+        }
+        let err = [0.5 * e[2][1], 0.5 * e[0][2], 0.5 * e[1][0]];
+        let mut tau = [0.0; 3];
+        for i in 0..3 {
+            self.att_integral[i] =
+                (self.att_integral[i] + err[i] * DT).clamp(-INTEGRAL_LIMIT, INTEGRAL_LIMIT);
+            tau[i] =
+                -gains[9 + i] * err[i] - gains[12 + i] * self.att_integral[i] - gains[15 + i] * self.rate[i];
+        }
+        let (q, k) = (thrust / 4.0, KM / KF);
+        [
+            q - tau[1] / (2.0 * ARM) - tau[2] / (4.0 * k),
+            q + tau[0] / (2.0 * ARM) + tau[2] / (4.0 * k),
+            q + tau[1] / (2.0 * ARM) - tau[2] / (4.0 * k),
+            q - tau[0] / (2.0 * ARM) + tau[2] / (4.0 * k),
+        ]
+    }
+
+    /// Rotor speeds (RPM) for the last rotor forces.
+    pub fn rotor_rpm(&self) -> [f64; 4] {
+        self.rotors.map(|f| (f / KF).sqrt())
+    }
+}
+
+impl Dynamics for Drone {
+    const NAME: &'static str = "drone";
+    const OBS_DIM: usize = 18;
+    const ACT_DIM: usize = 18;
+    const PLAN_DIM: usize = 3;
+    const REACH_RADIUS: f64 = 0.6;
+    const RADIUS: f64 = RADIUS;
+
+    fn action_space() -> BoxSpace {
+        BoxSpace::new(vec![-1.0; 18], vec![1.0; 18])
+    }
+
+    fn observation_space() -> BoxSpace {
+        BoxSpace::new(vec![f64::NEG_INFINITY; 18], vec![f64::INFINITY; 18])
+    }
+
+    fn reset(&mut self, start: &[f64], rng: &mut ChaCha8Rng) {
+        *self = Drone {
+            pos: [start[0], start[1], start[2]],
+            att: Quat::from_yaw(rng.random_range(-std::f64::consts::PI..std::f64::consts::PI)),
+            ..Drone::default()
+        };
+    }
+
+    fn advance(&mut self, action: &[f64], map: &Map, goal: &[f64]) -> bool {
+        let mut gains = BASE_GAINS;
+        for (g, a) in gains.iter_mut().zip(action) {
+            *g *= a.exp2();
+        }
+        let (desired, thrust) = self.position_loop(&gains, goal);
+        let speed = (self.vel[0].powi(2) + self.vel[1].powi(2) + self.vel[2].powi(2)).sqrt();
+        let check = contact::needs_checks(
+            map,
+            &self.pos,
+            RADIUS,
+            speed * CONTROL_DT + MAX_ACCEL * CONTROL_DT * CONTROL_DT + 1e-3,
+        );
+        let mut collided = false;
+        for _ in 0..SUBSTEPS {
+            let rotors = self.attitude_loop(&gains, &desired, thrust);
+            self.physics(rotors);
+            if check {
+                collided |= contact::resolve(map, &mut self.pos, &mut self.vel, RADIUS);
+            }
+        }
+        collided
+    }
+
+    fn plan_position(&self) -> &[f64] {
+        &self.pos
+    }
+
+    fn observe(&self, goal: &[f64], obs: &mut [f64]) {
+        let r = self.att.matrix();
+        let specific = [self.accel[0], self.accel[1], self.accel[2] + G];
+        let to_goal = [goal[0] - self.pos[0], goal[1] - self.pos[1], goal[2] - self.pos[2]];
+        obs[0..3].copy_from_slice(&apply_t(&r, specific));
+        obs[3..6].copy_from_slice(&apply_t(&r, self.vel));
+        obs[6..9].copy_from_slice(&self.rate);
+        obs[9..12].copy_from_slice(&apply_t(&r, MAGNETIC_FIELD));
+        obs[12..15].copy_from_slice(&apply_t(&r, [0.0, 0.0, 1.0]));
+        obs[15..18].copy_from_slice(&apply_t(&r, to_goal));
+    }
+}

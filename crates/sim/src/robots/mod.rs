@@ -1,0 +1,68 @@
+//! The robots: equations of motion and sensors, one module each.
+
+pub mod car;
+pub mod drone;
+pub mod point;
+
+/// Gravity (m/s²); the reference Drone uses 9.8, Safety Gym's MuJoCo 9.81.
+pub const GRAVITY: f64 = 9.81;
+
+/// MuJoCo's default global magnetic field (T), read by the magnetometers.
+pub const MAGNETIC_FIELD: [f64; 3] = [0.0, -0.5, 0.0];
+
+/// A planar heading kept as a unit vector, turned by small angles without calling
+/// `sin`/`cos` in the physics loop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Heading {
+    c: f64,
+    s: f64,
+}
+
+impl Heading {
+    /// The heading at angle `theta` (rad).
+    pub fn new(theta: f64) -> Self {
+        let (s, c) = theta.sin_cos();
+        Self { c, s }
+    }
+
+    /// The angle (rad), in (−π, π].
+    pub fn angle(&self) -> f64 {
+        self.s.atan2(self.c)
+    }
+
+    /// The unit vector.
+    pub fn dir(&self) -> [f64; 2] {
+        [self.c, self.s]
+    }
+
+    /// Turns by `dtheta`. Physics steps turn by milliradians, where a 4th-order
+    /// Taylor expansion is exact to 1e-15; larger turns use `sin_cos`.
+    pub fn rotate(&mut self, dtheta: f64) {
+        let (s, c) = if dtheta.abs() < 0.05 {
+            let d2 = dtheta * dtheta;
+            (dtheta * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0)), 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0))
+        } else {
+            dtheta.sin_cos()
+        };
+        let (c0, s0) = (self.c, self.s);
+        self.c = c0 * c - s0 * s;
+        self.s = s0 * c + c0 * s;
+    }
+
+    /// Removes rounding drift from the unit length.
+    pub fn normalize(&mut self) {
+        let n = self.c.hypot(self.s);
+        self.c /= n;
+        self.s /= n;
+    }
+
+    /// A world-frame vector in the body frame (x forward, y left).
+    pub fn to_body(&self, v: [f64; 2]) -> [f64; 2] {
+        [self.c * v[0] + self.s * v[1], -self.s * v[0] + self.c * v[1]]
+    }
+
+    /// A body-frame vector in the world frame.
+    pub fn to_world(&self, v: [f64; 2]) -> [f64; 2] {
+        [self.c * v[0] - self.s * v[1], self.s * v[0] + self.c * v[1]]
+    }
+}

@@ -1,0 +1,118 @@
+//! Unit quaternions for 3-D orientations (Drone body, Car caster ball).
+
+/// A unit quaternion `w + xi + yj + zk` rotating body vectors into the world.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Quat {
+    /// Scalar part.
+    pub w: f64,
+    /// Vector part.
+    pub v: [f64; 3],
+}
+
+impl Default for Quat {
+    fn default() -> Self {
+        Self::IDENTITY
+    }
+}
+
+impl Quat {
+    /// No rotation.
+    pub const IDENTITY: Quat = Quat { w: 1.0, v: [0.0; 3] };
+
+    /// Rotation by `angle` about the z axis.
+    pub fn from_yaw(angle: f64) -> Self {
+        let (s, c) = (0.5 * angle).sin_cos();
+        Quat { w: c, v: [0.0, 0.0, s] }
+    }
+
+    /// The product `self ⊗ o` (apply `o` first).
+    pub fn mul(&self, o: &Quat) -> Quat {
+        let (a, b) = (self.v, o.v);
+        Quat {
+            w: self.w * o.w - (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]),
+            v: [
+                self.w * b[0] + o.w * a[0] + a[1] * b[2] - a[2] * b[1],
+                self.w * b[1] + o.w * a[1] + a[2] * b[0] - a[0] * b[2],
+                self.w * b[2] + o.w * a[2] + a[0] * b[1] - a[1] * b[0],
+            ],
+        }
+    }
+
+    /// Integrates a body-frame angular velocity `omega` over `dt`:
+    /// `q ← q ⊗ exp(ω dt / 2)` (exact for constant ω), then renormalises.
+    pub fn integrate_body(&mut self, omega: [f64; 3], dt: f64) {
+        let n = (omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2]).sqrt();
+        if n * dt < 1e-12 {
+            return;
+        }
+        let (s, c) = half_angle_sin_cos(0.5 * n * dt);
+        let k = s / n;
+        *self = self.mul(&Quat { w: c, v: [omega[0] * k, omega[1] * k, omega[2] * k] });
+        self.normalize();
+    }
+
+    /// Integrates a world-frame angular velocity: `q ← exp(ω dt / 2) ⊗ q`.
+    pub fn integrate_world(&mut self, omega: [f64; 3], dt: f64) {
+        let n = (omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2]).sqrt();
+        if n * dt < 1e-12 {
+            return;
+        }
+        let (s, c) = (0.5 * n * dt).sin_cos();
+        let k = s / n;
+        *self = Quat { w: c, v: [omega[0] * k, omega[1] * k, omega[2] * k] }.mul(self);
+        self.normalize();
+    }
+
+    /// Restores unit length.
+    pub fn normalize(&mut self) {
+        let n = (self.w * self.w + self.v.iter().map(|x| x * x).sum::<f64>()).sqrt();
+        self.w /= n;
+        for x in &mut self.v {
+            *x /= n;
+        }
+    }
+
+    /// The rotation matrix, row-major (`world = R · body`).
+    pub fn matrix(&self) -> [[f64; 3]; 3] {
+        let (w, [x, y, z]) = (self.w, self.v);
+        [
+            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+            [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+            [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+        ]
+    }
+}
+
+/// `(sin h, cos h)`; physics steps turn by milliradians, where a Taylor expansion
+/// is exact to rounding and much cheaper than `sin_cos`.
+fn half_angle_sin_cos(h: f64) -> (f64, f64) {
+    if h.abs() < 0.02 {
+        let h2 = h * h;
+        (h * (1.0 - h2 / 6.0 * (1.0 - h2 / 20.0)), 1.0 - h2 / 2.0 * (1.0 - h2 / 12.0))
+    } else {
+        h.sin_cos()
+    }
+}
+
+/// `R · v`.
+pub fn apply(r: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
+    [
+        r[0][0] * v[0] + r[0][1] * v[1] + r[0][2] * v[2],
+        r[1][0] * v[0] + r[1][1] * v[1] + r[1][2] * v[2],
+        r[2][0] * v[0] + r[2][1] * v[1] + r[2][2] * v[2],
+    ]
+}
+
+/// `Rᵀ · v` (world to body).
+pub fn apply_t(r: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
+    [
+        r[0][0] * v[0] + r[1][0] * v[1] + r[2][0] * v[2],
+        r[0][1] * v[0] + r[1][1] * v[1] + r[2][1] * v[2],
+        r[0][2] * v[0] + r[1][2] * v[1] + r[2][2] * v[2],
+    ]
+}
+
+/// `a × b`.
+pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}

@@ -1,0 +1,109 @@
+//! Many environments stepped together, each seeded from one seed.
+
+use crate::env::{Env, EnvError, Step};
+use crate::map::Map;
+use crate::{Robot, make_env};
+
+/// The seed of environment `i` of a batch seeded with `seed` (SplitMix64), so that
+/// batches of different sizes share their first environments' streams.
+pub fn member_seed(seed: u64, i: usize) -> u64 {
+    let mut z = seed.wrapping_add((i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// N environments of one robot, stepped in order on the calling thread.
+pub struct VecEnv {
+    envs: Vec<Box<dyn Env>>,
+    obs_dim: usize,
+    act_dim: usize,
+}
+
+impl VecEnv {
+    /// `n` environments of `robot` on `map`, reset with seeds derived from `seed`.
+    pub fn new(robot: Robot, map: Map, n: usize, seed: u64) -> Result<Self, EnvError> {
+        let envs = (0..n).map(|_| make_env(robot, map.clone())).collect::<Result<Vec<_>, _>>()?;
+        let obs_dim = envs.first().map_or(0, |e| e.observation_space().dim());
+        let act_dim = envs.first().map_or(0, |e| e.action_space().dim());
+        let mut v = Self { envs, obs_dim, act_dim };
+        let mut obs = vec![0.0; n * obs_dim];
+        v.reset_all(seed, &mut obs)?;
+        Ok(v)
+    }
+
+    /// Number of environments.
+    pub fn len(&self) -> usize {
+        self.envs.len()
+    }
+
+    /// `true` if there are none.
+    pub fn is_empty(&self) -> bool {
+        self.envs.is_empty()
+    }
+
+    /// Observation length of one environment.
+    pub fn obs_dim(&self) -> usize {
+        self.obs_dim
+    }
+
+    /// Action length of one environment.
+    pub fn act_dim(&self) -> usize {
+        self.act_dim
+    }
+
+    /// The environments.
+    pub fn envs(&self) -> &[Box<dyn Env>] {
+        &self.envs
+    }
+
+    /// Mutable access to the environments (to set goals, reset one, ...).
+    pub fn envs_mut(&mut self) -> &mut [Box<dyn Env>] {
+        &mut self.envs
+    }
+
+    /// Resets every environment (`i` with [`member_seed`]`(seed, i)`), writing
+    /// observations into `obs` (`n × obs_dim`).
+    pub fn reset_all(&mut self, seed: u64, obs: &mut [f64]) -> Result<(), EnvError> {
+        self.check(obs.len(), self.obs_dim, "observation")?;
+        for (i, (env, o)) in self.envs.iter_mut().zip(obs.chunks_mut(self.obs_dim)).enumerate() {
+            env.reset_into(member_seed(seed, i), None, o)?;
+        }
+        Ok(())
+    }
+
+    /// Steps every environment with its action (`actions`: `n × act_dim`), writing
+    /// observations (`n × obs_dim`) and step reports.
+    pub fn step_all(&mut self, actions: &[f64], obs: &mut [f64], steps: &mut [Step]) -> Result<(), EnvError> {
+        self.check(actions.len(), self.act_dim, "action")?;
+        self.check(obs.len(), self.obs_dim, "observation")?;
+        if steps.len() != self.envs.len() {
+            return Err(EnvError::ObservationLength { expected: self.envs.len(), got: steps.len() });
+        }
+        for (((env, a), o), s) in self
+            .envs
+            .iter_mut()
+            .zip(actions.chunks(self.act_dim))
+            .zip(obs.chunks_mut(self.obs_dim))
+            .zip(steps)
+        {
+            *s = env.step_into(a, o)?;
+        }
+        Ok(())
+    }
+
+    fn check(&self, len: usize, per: usize, what: &'static str) -> Result<(), EnvError> {
+        let expected = per * self.envs.len();
+        if len == expected {
+            return Ok(());
+        }
+        Err(match what {
+            "action" => EnvError::ActionLength {
+                robot: self.envs.first().map_or("?", |e| e.robot_name()),
+                expected,
+                got: len,
+            },
+            _ => EnvError::ObservationLength { expected, got: len },
+        })
+    }
+}

@@ -1,0 +1,134 @@
+//! The goal-conditioned API: reward, reach, truncation, determinism, bad input.
+
+use sim::{Env, EnvError, Map, Robot, VecEnv, make_env};
+
+#[test]
+fn spaces_match_the_paper() {
+    for (robot, obs, act, plan) in
+        [(Robot::Point, 14, 2, 2), (Robot::Car, 26, 2, 2), (Robot::Drone, 18, 18, 3)]
+    {
+        let env = make_env(robot, robot.default_map()).unwrap();
+        assert_eq!(env.observation_space().dim(), obs, "{robot}");
+        assert_eq!(env.action_space().dim(), act, "{robot}");
+        assert_eq!(env.plan_dim(), plan, "{robot}");
+    }
+}
+
+#[test]
+fn reward_is_distance_decrease_plus_reach_bonus_once() {
+    let mut env = make_env(Robot::Point, Map::by_name("empty").unwrap()).unwrap();
+    env.reset(0, Some(&[0.0, 0.0])).unwrap();
+    env.set_goal(&[0.5, 0.0]).unwrap();
+    let mut total = 0.0;
+    let mut reaches = 0;
+    let mut last = 0.5;
+    for _ in 0..200 {
+        // Drive toward the goal whatever the heading: turn, then push.
+        let obs = env.reset_free_obs();
+        let (gx, gy) = (obs[12], obs[13]);
+        let action = [if gx > 0.0 { 1.0 } else { -1.0 }, (gy.atan2(gx.abs())).clamp(-1.0, 1.0)];
+        let (_, s) = env.step(&action).unwrap();
+        let p = env.position();
+        let d = (p[0] - 0.5).hypot(p[1]);
+        let expect = last - d + if s.reached { 20.0 } else { 0.0 };
+        assert!((s.reward - expect).abs() < 1e-12);
+        if s.reached {
+            assert!(d <= 0.3);
+        }
+        reaches += s.reached as usize;
+        total += s.reward;
+        last = d;
+    }
+    assert_eq!(reaches, 1, "reaching pays once per goal");
+    assert!(total > 20.0);
+    env.set_goal(&[0.0, 0.0]).unwrap();
+    let (_, s) = env.step(&[0.0, 0.0]).unwrap();
+    assert!(!s.reached || env.position()[0].hypot(env.position()[1]) <= 0.3);
+}
+
+trait ObsNow {
+    fn reset_free_obs(&self) -> Vec<f64>;
+}
+
+impl ObsNow for Box<dyn Env> {
+    fn reset_free_obs(&self) -> Vec<f64> {
+        let mut o = vec![0.0; self.observation_space().dim()];
+        self.observe(&mut o);
+        o
+    }
+}
+
+#[test]
+fn truncation_at_the_step_limit() {
+    let mut env = make_env(Robot::Car, Map::by_name("walls").unwrap()).unwrap();
+    env.reset(1, None).unwrap();
+    env.set_max_steps(5);
+    for i in 1..=5 {
+        let (_, s) = env.step(&[0.0, 0.0]).unwrap();
+        assert_eq!(s.truncated, i == 5);
+    }
+}
+
+#[test]
+fn same_seed_same_trajectory_different_seed_different() {
+    let run = |seed: u64| {
+        let mut v = VecEnv::new(Robot::Car, Map::by_name("walls").unwrap(), 4, seed).unwrap();
+        let mut obs = vec![0.0; 4 * v.obs_dim()];
+        let mut steps = vec![Default::default(); 4];
+        let actions: Vec<f64> = (0..8).map(|i| ((i * 37 % 11) as f64 / 5.5) - 1.0).collect();
+        for _ in 0..200 {
+            v.step_all(&actions, &mut obs, &mut steps).unwrap();
+        }
+        obs
+    };
+    assert_eq!(run(3), run(3));
+    assert_ne!(run(3), run(4));
+}
+
+#[test]
+fn bad_input_is_an_error_and_leaves_the_state_alone() {
+    let mut env = make_env(Robot::Point, Map::by_name("walls").unwrap()).unwrap();
+    env.reset(0, Some(&[2.0, 2.0])).unwrap();
+    let before = env.position().to_vec();
+    assert!(matches!(env.step(&[1.0]), Err(EnvError::ActionLength { expected: 2, got: 1, .. })));
+    assert!(matches!(env.step(&[f64::NAN, 0.0]), Err(EnvError::NonFiniteAction { index: 0, .. })));
+    assert!(matches!(env.step(&[0.0, f64::INFINITY]), Err(EnvError::NonFiniteAction { index: 1, .. })));
+    assert_eq!(env.position(), &before[..]);
+    assert_eq!(env.steps(), 0);
+    assert!(matches!(env.set_goal(&[1.0, 2.0, 3.0]), Err(EnvError::BadPoint { .. })));
+    assert!(matches!(env.reset(0, Some(&[0.0, 0.0])), Err(EnvError::StartBlocked { .. })));
+    assert!("tank".parse::<Robot>().is_err());
+    assert!(Map::by_name("maze").is_none());
+    assert!(matches!(
+        make_env(Robot::Drone, Map::by_name("walls").unwrap()),
+        Err(EnvError::MapMismatch { .. })
+    ));
+    let err = "tank".parse::<Robot>().unwrap_err().to_string();
+    assert!(err.contains("unknown robot 'tank'"), "{err}");
+}
+
+#[test]
+fn walls_sdf_is_exact_and_its_gradient_matches() {
+    let map = Map::by_name("walls").unwrap();
+    // Door between the centre bar (ends at 1.25) and the outer bar (starts at 2.75).
+    assert!((map.sdf(&[2.0, 0.0]) - 0.75).abs() < 1e-12);
+    assert!((map.sdf(&[0.6, 0.6]) - 0.35).abs() < 1e-12, "{}", map.sdf(&[0.6, 0.6]));
+    assert!(map.sdf(&[0.0, 0.1]) < 0.0);
+    for p in [[1.7, 0.9], [0.4, 2.2], [-3.0, -0.6], [1.9, 0.1], [0.1, 0.2], [3.9, 0.3]] {
+        let mut g = [0.0; 3];
+        map.sdf_grad(&p, &mut g);
+        for i in 0..2 {
+            let mut q = p;
+            q[i] += 1e-7;
+            let up = map.sdf(&q);
+            q[i] -= 2e-7;
+            let fd = (up - map.sdf(&q)) / 2e-7;
+            assert!((fd - g[i]).abs() < 1e-5, "{p:?}[{i}]: {} vs {fd}", g[i]);
+        }
+    }
+    let duck = Map::by_name("duck").unwrap();
+    assert!((duck.sdf(&[3.0, 3.0, 0.7]) - 0.7).abs() < 1e-12, "floor");
+    assert!(duck.sdf(&[0.0, 0.0, 0.5]) < 0.0, "inside the body");
+    assert!(duck.sdf(&[0.45, 0.0, 1.45]) < 0.0, "inside the head");
+    assert!((duck.sdf(&[0.45, 0.0, 2.35]) - 0.5).abs() < 1e-12, "0.5 above the head");
+}

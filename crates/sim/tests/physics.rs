@@ -1,0 +1,212 @@
+//! Physics sanity of the native robots: damping, pushes, walls, no penetration,
+//! energy, hover and free fall.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use sim::robots::drone::{HOVER_FORCE, ROTOR_MAX};
+use sim::{Car, Drone, Dynamics, Env, GoalEnv, Map, Point, Robot, make_env};
+
+fn walls() -> Map {
+    Map::by_name("walls").unwrap()
+}
+
+fn point_at(pos: [f64; 2], heading: f64) -> GoalEnv<Point> {
+    let mut env = GoalEnv::new(Point::default(), walls()).unwrap();
+    env.reset(0, Some(&pos)).unwrap();
+    env.dynamics_mut().heading = sim::robots::Heading::new(heading);
+    env
+}
+
+fn speed2(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum()
+}
+
+#[test]
+fn point_push_moves_along_heading_to_terminal_speed_then_damping_stops_it() {
+    // Heading −135°, away from the walls, across the open lower-left room and beyond.
+    let mut env = point_at([-1.0, -1.0], -3.0 * std::f64::consts::FRAC_PI_4);
+    for _ in 0..400 {
+        env.step(&[1.0, 0.0]).unwrap();
+    }
+    let p = env.dynamics();
+    // Terminal speed: gear 0.3 × force limit 0.05 / damping 0.01 = 1.5 m/s, along −135°.
+    assert!((p.vel[0].hypot(p.vel[1]) - 1.5).abs() < 0.01, "{:?}", p.vel);
+    assert!((p.vel[0] - p.vel[1]).abs() < 1e-9 && p.vel[0] < 0.0, "moves along its heading: {:?}", p.vel);
+    // Damping alone brings it to rest (time constant m/c ≈ 0.52 s).
+    let mut env = point_at([-2.0, -2.0], 0.0);
+    env.dynamics_mut().vel = [0.5, 0.0];
+    env.dynamics_mut().yaw_rate = 2.0;
+    for _ in 0..1000 {
+        env.step(&[0.0, 0.0]).unwrap();
+    }
+    assert!(speed2(&env.dynamics().vel) < 1e-12 && env.dynamics().yaw_rate.abs() < 1e-9);
+}
+
+#[test]
+fn point_turns_with_the_yaw_servo() {
+    let mut env = point_at([-2.0, -2.0], 0.0);
+    for _ in 0..50 {
+        env.step(&[0.0, 1.0]).unwrap();
+    }
+    // Servo equilibrium of 0.3·clamp(1 − 0.3ω, ±0.05) = 0.005ω: ω = 3 rad/s.
+    assert!((env.dynamics().yaw_rate - 3.0).abs() < 1e-3, "{}", env.dynamics().yaw_rate);
+}
+
+#[test]
+fn point_stops_at_a_wall() {
+    // Facing +x toward the vertical bar's face at x = -0.25.
+    let mut env = point_at([-1.5, 0.6], 0.0);
+    let mut collided = false;
+    for _ in 0..300 {
+        let (_, s) = env.step(&[1.0, 0.0]).unwrap();
+        collided |= s.collided;
+        assert!(env.map().sdf(env.position()) >= 0.1 - 1e-9);
+    }
+    assert!(collided);
+    let p = env.dynamics();
+    assert!((p.pos[0] - (-0.35)).abs() < 1e-6, "rests against the wall: {:?}", p.pos);
+    assert!(p.vel[0].abs() < 1e-9);
+}
+
+fn no_penetration(robot: Robot, map: Map, steps: usize, radius: f64) {
+    let mut env = make_env(robot, map).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let n = env.action_space().dim();
+    env.reset(3, None).unwrap();
+    let mut hits = 0;
+    let mut action = vec![0.0; n];
+    for t in 0..steps {
+        if t % 20 == 0 {
+            action.iter_mut().for_each(|a| *a = rng.random_range(-1.0..1.0));
+            // Aim at a random goal so that robots cross the map and meet obstacles.
+            let g = env.sample_goal();
+            env.set_goal(&g).unwrap();
+        }
+        let (_, s) = env.step(&action).unwrap();
+        hits += s.collided as usize;
+        let d = env.map().sdf(env.position());
+        assert!(d >= radius - 1e-6, "{robot} inside an obstacle at step {t}: sdf {d}");
+        if t % 2000 == 1999 {
+            env.reset(t as u64, None).unwrap();
+        }
+    }
+    assert!(hits > 0, "{robot}: the random walk should touch obstacles");
+}
+
+#[test]
+fn no_penetration_after_many_random_steps() {
+    no_penetration(Robot::Point, walls(), 100_000, 0.1);
+    no_penetration(Robot::Car, walls(), 100_000, 0.2);
+    no_penetration(Robot::Drone, Map::by_name("duck").unwrap(), 100_000, 0.2);
+}
+
+#[test]
+fn energy_does_not_grow_without_input() {
+    let mut point = point_at([-2.0, -2.0], 0.3);
+    point.dynamics_mut().vel = [0.8, -0.3];
+    point.dynamics_mut().yaw_rate = 1.0;
+    let mut e = f64::INFINITY;
+    for _ in 0..300 {
+        point.step(&[0.0, 0.0]).unwrap();
+        let k = speed2(&point.dynamics().vel);
+        assert!(k <= e + 1e-15);
+        e = k;
+    }
+    let mut car = GoalEnv::new(Car::default(), walls()).unwrap();
+    car.reset(0, Some(&[-2.0, -2.0])).unwrap();
+    car.dynamics_mut().vel = [0.3, 0.1];
+    car.dynamics_mut().yaw_rate = 2.0;
+    let mut e = f64::INFINITY;
+    for _ in 0..300 {
+        car.step(&[0.0, 0.0]).unwrap();
+        let c = car.dynamics();
+        let k = 0.030_445 * speed2(&c.vel) + 3.44e-4 * c.yaw_rate * c.yaw_rate;
+        assert!(k <= e + 1e-15, "{k} > {e}");
+        e = k;
+    }
+    assert!(e < 1e-8, "friction and drag stop the car: {e}");
+}
+
+#[test]
+fn car_drives_straight_turns_in_place_and_skids() {
+    let mut car = GoalEnv::new(Car::default(), walls()).unwrap();
+    car.reset(0, Some(&[-2.0, -2.0])).unwrap();
+    let h0 = car.dynamics().heading.angle();
+    for _ in 0..50 {
+        car.step(&[1.0, 1.0]).unwrap();
+    }
+    let c = car.dynamics();
+    assert!((c.heading.angle() - h0).abs() < 1e-9, "equal torques keep the heading");
+    let [fwd, lat] = c.heading.to_body(c.vel);
+    assert!(fwd > 0.1 && lat.abs() < 1e-9, "{fwd} {lat}");
+    let start = c.pos;
+    for _ in 0..50 {
+        car.step(&[1.0, -1.0]).unwrap();
+    }
+    let c = car.dynamics();
+    assert!(c.yaw_rate < -1.0, "left forward, right back: turns clockwise: {}", c.yaw_rate);
+    // Spinning after driving straight at speed: the momentum makes it skid sideways.
+    assert!((c.pos[0] - start[0]).hypot(c.pos[1] - start[1]) > 0.05);
+}
+
+#[test]
+fn drone_hovers_at_hover_thrust_and_falls_without_it() {
+    let duck = Map::by_name("duck").unwrap();
+    let mut d = Drone { pos: [2.0, 2.0, 1.5], ..Drone::default() };
+    for _ in 0..200 {
+        d.fly_rotors([HOVER_FORCE; 4], &duck);
+    }
+    assert!((d.pos[2] - 1.5).abs() < 1e-9 && d.vel.iter().all(|v| v.abs() < 1e-9), "{:?}", d.pos);
+    let mut d = Drone { pos: [2.0, 2.0, 1.5], ..Drone::default() };
+    d.fly_rotors([0.0; 4], &duck);
+    d.fly_rotors([0.0; 4], &duck);
+    // Free fall for 0.04 s, semi-implicit Euler at 250 Hz: Σ v dt.
+    let fall = 9.8 * 0.004 * 0.004 * (10.0 * 11.0 / 2.0);
+    assert!((1.5 - d.pos[2] - fall).abs() < 1e-12, "{}", d.pos[2]);
+    // Full thrust climbs; the floor stops a fall.
+    let mut d = Drone { pos: [2.0, 2.0, 1.0], ..Drone::default() };
+    d.fly_rotors([ROTOR_MAX; 4], &duck);
+    assert!(d.pos[2] > 1.0);
+    let mut d = Drone { pos: [2.0, 2.0, 0.5], ..Drone::default() };
+    let mut hit = false;
+    for _ in 0..100 {
+        hit |= d.fly_rotors([0.0; 4], &duck);
+    }
+    assert!(hit && (d.pos[2] - 0.2).abs() < 1e-9, "rests on the floor: {:?}", d.pos);
+}
+
+#[test]
+fn drone_controller_flies_to_the_goal() {
+    let mut env = GoalEnv::new(Drone::default(), Map::by_name("duck").unwrap()).unwrap();
+    env.reset(0, Some(&[2.0, -2.0, 1.0])).unwrap();
+    env.set_goal(&[2.0, 1.0, 2.0]).unwrap();
+    let mut reached = false;
+    for _ in 0..1500 {
+        let (_, s) = env.step(&[0.0; 18]).unwrap();
+        reached |= s.reached;
+        assert!(!s.collided);
+    }
+    assert!(reached, "base gains reach a 3.2 m goal: ended at {:?}", env.position());
+    assert_eq!(<Drone as Dynamics>::OBS_DIM, 18);
+}
+
+/// Regression: in a concave corner where two walls meet, one push-out along the
+/// nearer wall's normal left the robot inside the other wall.
+#[test]
+fn concave_corner_contact_leaves_the_robot_outside_both_walls() {
+    for (robot, radius) in [(Robot::Point, 0.1), (Robot::Car, 0.2)] {
+        let mut env = make_env(robot, walls()).unwrap();
+        env.reset(0, Some(&[1.0, 1.0])).unwrap();
+        // Drive into the corner at (0.25, 0.25) from the upper-right room.
+        env.set_goal(&[0.2, 0.2]).unwrap();
+        for _ in 0..500 {
+            let mut obs = vec![0.0; env.observation_space().dim()];
+            env.observe(&mut obs);
+            let g = &obs[obs.len() - 2..];
+            let turn = g[1].atan2(g[0]).clamp(-1.0, 1.0);
+            let action = if robot == Robot::Point { [1.0, turn] } else { [1.0 - turn, 1.0 + turn] };
+            env.step(&action).unwrap();
+            assert!(env.map().sdf(env.position()) >= radius - 1e-9, "{robot} at {:?}", env.position());
+        }
+    }
+}
