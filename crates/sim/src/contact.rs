@@ -5,17 +5,45 @@
 //! velocity into the obstacle is removed (an inelastic contact) and the tangential
 //! velocity is reduced by Coulomb friction using the normal impulse, as a
 //! velocity-level contact solver would. Per physics substep robots move millimetres,
-//! far less than any wall is thick, so nothing tunnels; [`needs_checks`] skips the
-//! per-substep checks when the robot cannot reach an obstacle during the step.
+//! far less than any wall is thick, so nothing tunnels; [`ContactGuard`] skips the
+//! map query while the robot is farther from every obstacle than it has moved.
 
 use crate::map::Map;
 
 /// MuJoCo's default sliding friction coefficient, used for robot–obstacle contact.
 pub const WALL_FRICTION: f64 = 1.0;
 
-/// `true` if an obstacle may be touched within `reach` metres of travel.
-pub fn needs_checks(map: &Map, p: &[f64], radius: f64, reach: f64) -> bool {
-    map.sdf(p) <= radius + reach
+/// Tracks how far a shape can still move before it may touch an obstacle, so that
+/// the map is only queried when contact is possible.
+#[derive(Clone, Copy, Debug)]
+pub struct ContactGuard {
+    clearance: f64,
+}
+
+impl ContactGuard {
+    /// The guard for a shape of `radius` at `p`.
+    pub fn new(map: &Map, p: &[f64], radius: f64) -> Self {
+        Self { clearance: map.sdf(p) - radius }
+    }
+
+    /// After the shape moved by at most `travel` metres, resolves contact if it may
+    /// touch; returns whether it touches.
+    #[inline]
+    pub fn after_move(&mut self, map: &Map, p: &mut [f64], v: &mut [f64], radius: f64, travel: f64) -> bool {
+        self.clearance -= travel;
+        if self.clearance > 0.0 {
+            return false;
+        }
+        let touched = resolve(map, p, v, radius);
+        self.clearance = map.sdf(p) - radius;
+        touched
+    }
+}
+
+/// An upper bound of a step's length: the L1 norm of `v · dt` (no square root).
+#[inline]
+pub fn travel_bound(v: &[f64], dt: f64) -> f64 {
+    v.iter().map(|x| x.abs()).sum::<f64>() * dt
 }
 
 /// Resolves contact for a shape of `radius` at `p` moving at `v` (both of the map's

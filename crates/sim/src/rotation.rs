@@ -41,14 +41,29 @@ impl Quat {
     /// Integrates a body-frame angular velocity `omega` over `dt`:
     /// `q ← q ⊗ exp(ω dt / 2)` (exact for constant ω), then renormalises.
     pub fn integrate_body(&mut self, omega: [f64; 3], dt: f64) {
-        let n = (omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2]).sqrt();
-        if n * dt < 1e-12 {
-            return;
-        }
-        let (s, c) = half_angle_sin_cos(0.5 * n * dt);
-        let k = s / n;
-        *self = self.mul(&Quat { w: c, v: [omega[0] * k, omega[1] * k, omega[2] * k] });
+        self.integrate_body_unnormalized(omega, dt);
         self.normalize();
+    }
+
+    /// [`Quat::integrate_body`] without the final renormalisation, for physics loops
+    /// that renormalise once per control step. For the turns of a physics step
+    /// (|ω dt| < 0.04) it uses Taylor series in `h² = (|ω| dt / 2)²`, so no square
+    /// root is taken; the step's quaternion has unit length to rounding.
+    pub fn integrate_body_unnormalized(&mut self, omega: [f64; 3], dt: f64) {
+        let n2 = omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2];
+        let h2 = 0.25 * n2 * dt * dt;
+        let (c, k) = if h2 < 4e-4 {
+            // cos h and sin(h)/|ω| = (dt/2)·sin(h)/h.
+            (
+                1.0 - h2 * (1.0 / 2.0) * (1.0 - h2 * (1.0 / 12.0)),
+                0.5 * dt * (1.0 - h2 * (1.0 / 6.0) * (1.0 - h2 * (1.0 / 20.0))),
+            )
+        } else {
+            let n = n2.sqrt();
+            let (s, c) = (0.5 * n * dt).sin_cos();
+            (c, s / n)
+        };
+        *self = self.mul(&Quat { w: c, v: [omega[0] * k, omega[1] * k, omega[2] * k] });
     }
 
     /// Integrates a world-frame angular velocity: `q ← exp(ω dt / 2) ⊗ q`.
@@ -80,17 +95,6 @@ impl Quat {
             [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
             [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
         ]
-    }
-}
-
-/// `(sin h, cos h)`; physics steps turn by milliradians, where a Taylor expansion
-/// is exact to rounding and much cheaper than `sin_cos`.
-fn half_angle_sin_cos(h: f64) -> (f64, f64) {
-    if h.abs() < 0.02 {
-        let h2 = h * h;
-        (h * (1.0 - h2 / 6.0 * (1.0 - h2 / 20.0)), 1.0 - h2 / 2.0 * (1.0 - h2 / 12.0))
-    } else {
-        h.sin_cos()
     }
 }
 

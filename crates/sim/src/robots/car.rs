@@ -35,7 +35,7 @@
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::contact;
+use crate::contact::{self, ContactGuard};
 use crate::env::{BoxSpace, Dynamics};
 use crate::map::Map;
 use crate::robots::{GRAVITY, Heading, MAGNETIC_FIELD};
@@ -57,8 +57,13 @@ const MU: f64 = 1.0;
 const WHEEL_LOAD: f64 = MASS * GRAVITY / 4.0;
 const CASTER_LOAD: f64 = MASS * GRAVITY / 2.0;
 const RADIUS: f64 = 0.2;
-/// Most the car can accelerate (m/s²): all friction forward.
-const MAX_ACCEL: f64 = MU * GRAVITY;
+const INV_MASS: f64 = 1.0 / MASS;
+const INV_WHEEL_RADIUS: f64 = 1.0 / WHEEL_RADIUS;
+const INV_WHEEL_DAMPING: f64 = 1.0 / WHEEL_DAMPING;
+const INV_INERTIA: f64 = 1.0 / INERTIA;
+const CASTER_DRAG: f64 = CASTER_DAMPING / (CASTER_RADIUS * CASTER_RADIUS);
+// Effective mass of a sideways impulse at the wheels' contact points.
+const LATERAL_MASS: f64 = 1.0 / (INV_MASS + WHEEL_X * WHEEL_X * INV_INERTIA);
 
 /// The Car's state.
 #[derive(Clone, Debug, PartialEq)]
@@ -100,48 +105,52 @@ impl Car {
     fn substep(&mut self, torque: [f64; 2]) {
         let [mut u, mut l] = self.heading.to_body(self.vel);
         let mut w = self.yaw_rate;
-        let old = self.vel;
         // Traction of each wheel (left at +y, right at −y).
         let mut long = [0.0; 2];
         for (i, y) in [WHEEL_Y, -WHEEL_Y].into_iter().enumerate() {
             let v_long = u - w * y;
-            let rolling = (torque[i] - WHEEL_DAMPING * v_long / WHEEL_RADIUS) / WHEEL_RADIUS;
+            let rolling = (torque[i] - WHEEL_DAMPING * v_long * INV_WHEEL_RADIUS) * INV_WHEEL_RADIUS;
             if rolling.abs() <= MU * WHEEL_LOAD {
                 long[i] = rolling;
-                self.wheel_speed[i] = v_long / WHEEL_RADIUS;
+                self.wheel_speed[i] = v_long * INV_WHEEL_RADIUS;
             } else {
                 long[i] = MU * WHEEL_LOAD * rolling.signum();
-                self.wheel_speed[i] = (torque[i] - WHEEL_RADIUS * long[i]) / WHEEL_DAMPING;
+                self.wheel_speed[i] = (torque[i] - WHEEL_RADIUS * long[i]) * INV_WHEEL_DAMPING;
             }
         }
         // Caster rolling drag, bounded by its friction.
         let (cu, cl) = (u, l + w * CASTER_X);
-        let drag = CASTER_DAMPING / (CASTER_RADIUS * CASTER_RADIUS);
-        let cap = (MU * CASTER_LOAD / (drag * cu.hypot(cl)).max(1e-12)).min(1.0);
-        let (fcu, fcl) = (-drag * cu * cap, -drag * cl * cap);
+        let drag2 = CASTER_DRAG * CASTER_DRAG * (cu * cu + cl * cl);
+        let cap = if drag2 > (MU * CASTER_LOAD) * (MU * CASTER_LOAD) {
+            MU * CASTER_LOAD / drag2.sqrt()
+        } else {
+            1.0
+        };
+        let (fcu, fcl) = (-CASTER_DRAG * cu * cap, -CASTER_DRAG * cl * cap);
         // Explicit update with the traction and drag forces.
         let fx = long[0] + long[1] + fcu;
         let tau = -WHEEL_Y * long[0] + WHEEL_Y * long[1] + CASTER_X * fcl;
-        u += DT * fx / MASS;
-        l += DT * fcl / MASS;
-        w += DT * tau / INERTIA;
-        // Sideways friction at the wheels: impulses that stop lateral slip, within the
-        // friction each wheel has left after traction (two Gauss–Seidel sweeps).
-        let k_lat = 1.0 / (1.0 / MASS + WHEEL_X * WHEEL_X / INERTIA);
-        for _ in 0..2 {
-            for f in long {
-                let v_lat = l + w * WHEEL_X;
-                let limit = ((MU * WHEEL_LOAD).powi(2) - f * f).max(0.0).sqrt() * DT;
-                let j = (-v_lat * k_lat).clamp(-limit, limit);
-                l += j / MASS;
-                w += WHEEL_X * j / INERTIA;
-            }
-        }
+        u += DT * fx * INV_MASS;
+        l += DT * fcl * INV_MASS;
+        w += DT * tau * INV_INERTIA;
+        // Sideways friction: both wheels sit at the same x, so their contact points
+        // slide sideways at one speed; the impulse that stops it is bounded by the
+        // friction both wheels have left after traction (the fixed point of a
+        // Gauss–Seidel contact solve, in closed form).
+        let want = -(l + w * WHEEL_X) * LATERAL_MASS;
+        // √(a² − f²) ≥ a − |f|: when the impulse is within that bound, no root is needed.
+        let a = MU * WHEEL_LOAD;
+        let j = if want.abs() <= (2.0 * a - long[0].abs() - long[1].abs()) * DT {
+            want
+        } else {
+            let room = |f: f64| (a * a - f * f).max(0.0).sqrt();
+            let limit = (room(long[0]) + room(long[1])) * DT;
+            want.clamp(-limit, limit)
+        };
+        l += j * INV_MASS;
+        w += WHEEL_X * j * INV_INERTIA;
         self.vel = self.heading.to_world([u, l]);
         self.yaw_rate = w;
-        for i in 0..2 {
-            self.accel[i] = (self.vel[i] - old[i]) / DT;
-        }
         self.heading.rotate(w * DT);
         self.pos[0] += DT * self.vel[0];
         self.pos[1] += DT * self.vel[1];
@@ -177,15 +186,16 @@ impl Dynamics for Car {
     fn advance(&mut self, action: &[f64], map: &Map, _goal: &[f64]) -> bool {
         let torque = [action[0].clamp(-MOTOR_LIMIT, MOTOR_LIMIT), action[1].clamp(-MOTOR_LIMIT, MOTOR_LIMIT)];
         let t = DT * SUBSTEPS as f64;
-        let speed = self.vel[0].hypot(self.vel[1]);
-        let check = contact::needs_checks(map, &self.pos, RADIUS, speed * t + 0.5 * MAX_ACCEL * t * t + 1e-3);
+        let mut guard = ContactGuard::new(map, &self.pos, RADIUS);
         let mut collided = false;
+        let mut before = self.vel;
         for _ in 0..SUBSTEPS {
+            before = self.vel;
             self.substep(torque);
-            if check {
-                collided |= contact::resolve(map, &mut self.pos, &mut self.vel, RADIUS);
-            }
+            let travel = contact::travel_bound(&self.vel, DT);
+            collided |= guard.after_move(map, &mut self.pos, &mut self.vel, RADIUS, travel);
         }
+        self.accel = [(self.vel[0] - before[0]) / DT, (self.vel[1] - before[1]) / DT];
         self.heading.normalize();
         // The caster rolls without slipping under its contact point's velocity.
         let [vx, vy] = self.vel;
@@ -220,13 +230,14 @@ impl Dynamics for Car {
             my,
             MAGNETIC_FIELD[2],
         ]);
-        // Caster relative to the chassis: R_chassisᵀ R_ball, and its rate in the chassis frame.
-        let chassis = Quat::from_yaw(h.angle());
-        let rel = Quat { w: chassis.w, v: [-chassis.v[0], -chassis.v[1], -chassis.v[2]] }
-            .mul(&self.caster)
-            .matrix();
-        for (i, row) in rel.iter().enumerate() {
-            obs[12 + 3 * i..15 + 3 * i].copy_from_slice(row);
+        // Caster relative to the chassis: R_chassisᵀ R_ball, with R_chassis the yaw
+        // rotation by the heading (no trigonometry needed).
+        let [c, s] = h.dir();
+        let ball = self.caster.matrix();
+        for j in 0..3 {
+            obs[12 + j] = c * ball[0][j] + s * ball[1][j];
+            obs[15 + j] = -s * ball[0][j] + c * ball[1][j];
+            obs[18 + j] = ball[2][j];
         }
         let r = [[h.dir()[0], -h.dir()[1], 0.0], [h.dir()[1], h.dir()[0], 0.0], [0.0, 0.0, 1.0]];
         let rate = [self.caster_rate[0], self.caster_rate[1], self.caster_rate[2] - self.yaw_rate];

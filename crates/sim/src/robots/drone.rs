@@ -29,7 +29,7 @@
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::contact;
+use crate::contact::{self, ContactGuard};
 use crate::env::{BoxSpace, Dynamics};
 use crate::map::Map;
 use crate::robots::MAGNETIC_FIELD;
@@ -53,7 +53,6 @@ const SUBSTEPS: usize = 5;
 const DT: f64 = CONTROL_DT / SUBSTEPS as f64;
 const RADIUS: f64 = 0.2;
 const TILT_LIMIT: f64 = std::f64::consts::PI / 6.0;
-const MAX_ACCEL: f64 = (THRUST_TO_WEIGHT + 1.0) * G;
 const INTEGRAL_LIMIT: f64 = 2.0;
 
 /// Base PID gains: force P, I, D, torque P, I, D (3 axes each).
@@ -99,18 +98,18 @@ impl Default for Drone {
 }
 
 impl Drone {
-    /// One physics step with the given rotor forces (clipped to [0, max]).
-    fn physics(&mut self, rotors: [f64; 4]) {
+    /// One physics step with the given rotor forces (clipped to [0, max]); `r` is
+    /// the current orientation's matrix.
+    fn physics(&mut self, r: &[[f64; 3]; 3], rotors: [f64; 4]) {
         let f = rotors.map(|x| x.clamp(0.0, ROTOR_MAX));
         self.rotors = f;
-        let thrust = f.iter().sum::<f64>();
+        let thrust = f[0] + f[1] + f[2] + f[3];
         let torque = [ARM * (f[1] - f[3]), ARM * (f[2] - f[0]), KM / KF * (-f[0] + f[1] - f[2] + f[3])];
-        let r = self.att.matrix();
-        let up = apply(&r, [0.0, 0.0, thrust / MASS]);
-        let old = self.vel;
+        // Thrust along the body z axis (the matrix's third column), gravity down.
+        let a = thrust / MASS;
+        self.accel = [a * r[0][2], a * r[1][2], a * r[2][2] - G];
         for i in 0..3 {
-            self.vel[i] += DT * (up[i] - if i == 2 { G } else { 0.0 });
-            self.accel[i] = (self.vel[i] - old[i]) / DT;
+            self.vel[i] += DT * self.accel[i];
             self.pos[i] += DT * self.vel[i];
         }
         // Euler's equations in the body frame.
@@ -120,7 +119,7 @@ impl Drone {
         for i in 0..3 {
             self.rate[i] += DT * (torque[i] - gyro[i]) / INERTIA[i];
         }
-        self.att.integrate_body(self.rate, DT);
+        self.att.integrate_body_unnormalized(self.rate, DT);
     }
 
     /// Flies one control step with fixed rotor forces, bypassing the controller (for
@@ -128,9 +127,11 @@ impl Drone {
     pub fn fly_rotors(&mut self, rotors: [f64; 4], map: &Map) -> bool {
         let mut hit = false;
         for _ in 0..SUBSTEPS {
-            self.physics(rotors);
+            let r = self.att.matrix();
+            self.physics(&r, rotors);
             hit |= contact::resolve(map, &mut self.pos, &mut self.vel, RADIUS);
         }
+        self.att.normalize();
         hit
     }
 
@@ -167,20 +168,18 @@ impl Drone {
     }
 
     /// The attitude loop and mixer: rotor forces for the desired attitude.
-    fn attitude_loop(&mut self, gains: &[f64; 18], desired: &[[f64; 3]; 3], thrust: f64) -> [f64; 4] {
-        let r = self.att.matrix();
+    fn attitude_loop(
+        &mut self,
+        r: &[[f64; 3]; 3],
+        gains: &[f64; 18],
+        desired: &[[f64; 3]; 3],
+        thrust: f64,
+    ) -> [f64; 4] {
         // E = R_dᵀR − RᵀR_d is skew-symmetric; e = ½ vee(E).
-        let mut e = [[0.0; 3]; 3];
-        for i in 0..3 {
-            for j in 0..3 {
-                let mut s = 0.0;
-                for k in 0..3 {
-                    s += desired[k][i] * r[k][j] - r[k][i] * desired[k][j];
-                }
-                e[i][j] = s;
-            }
-        }
-        let err = [0.5 * e[2][1], 0.5 * e[0][2], 0.5 * e[1][0]];
+        let e = |i: usize, j: usize| {
+            (0..3).map(|k| desired[k][i] * r[k][j] - r[k][i] * desired[k][j]).sum::<f64>()
+        };
+        let err = [0.5 * e(2, 1), 0.5 * e(0, 2), 0.5 * e(1, 0)];
         let mut tau = [0.0; 3];
         for i in 0..3 {
             self.att_integral[i] =
@@ -233,21 +232,16 @@ impl Dynamics for Drone {
             *g *= a.exp2();
         }
         let (desired, thrust) = self.position_loop(&gains, goal);
-        let speed = (self.vel[0].powi(2) + self.vel[1].powi(2) + self.vel[2].powi(2)).sqrt();
-        let check = contact::needs_checks(
-            map,
-            &self.pos,
-            RADIUS,
-            speed * CONTROL_DT + MAX_ACCEL * CONTROL_DT * CONTROL_DT + 1e-3,
-        );
+        let mut guard = ContactGuard::new(map, &self.pos, RADIUS);
         let mut collided = false;
         for _ in 0..SUBSTEPS {
-            let rotors = self.attitude_loop(&gains, &desired, thrust);
-            self.physics(rotors);
-            if check {
-                collided |= contact::resolve(map, &mut self.pos, &mut self.vel, RADIUS);
-            }
+            let r = self.att.matrix();
+            let rotors = self.attitude_loop(&r, &gains, &desired, thrust);
+            self.physics(&r, rotors);
+            let travel = contact::travel_bound(&self.vel, DT);
+            collided |= guard.after_move(map, &mut self.pos, &mut self.vel, RADIUS, travel);
         }
+        self.att.normalize();
         collided
     }
 

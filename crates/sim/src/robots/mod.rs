@@ -40,7 +40,10 @@ impl Heading {
     pub fn rotate(&mut self, dtheta: f64) {
         let (s, c) = if dtheta.abs() < 0.05 {
             let d2 = dtheta * dtheta;
-            (dtheta * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0)), 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0))
+            (
+                dtheta * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0))),
+                1.0 - d2 * (1.0 / 2.0) * (1.0 - d2 * (1.0 / 12.0)),
+            )
         } else {
             dtheta.sin_cos()
         };
@@ -51,9 +54,9 @@ impl Heading {
 
     /// Removes rounding drift from the unit length.
     pub fn normalize(&mut self) {
-        let n = self.c.hypot(self.s);
-        self.c /= n;
-        self.s /= n;
+        let k = 1.0 / (self.c * self.c + self.s * self.s).sqrt();
+        self.c *= k;
+        self.s *= k;
     }
 
     /// A world-frame vector in the body frame (x forward, y left).

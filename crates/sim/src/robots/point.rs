@@ -28,7 +28,7 @@
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::contact;
+use crate::contact::{self, ContactGuard};
 use crate::env::{BoxSpace, Dynamics};
 use crate::map::Map;
 use crate::robots::{GRAVITY, Heading, MAGNETIC_FIELD};
@@ -43,8 +43,9 @@ const SLIDE_DAMPING: f64 = 0.01;
 const HINGE_DAMPING: f64 = 0.005;
 const GEAR: f64 = 0.3;
 const FORCE_LIMIT: f64 = 0.05;
-/// Most the robot can accelerate (m/s²), for skipping contact checks.
-const MAX_ACCEL: f64 = GEAR * FORCE_LIMIT / MASS;
+// Implicit damping factor of one step, and force-to-velocity-change, precomputed.
+const DAMP: f64 = 1.0 / (1.0 + DT * SLIDE_DAMPING / MASS);
+const DV_PER_N: f64 = DT / MASS;
 
 /// The Point robot's state.
 #[derive(Clone, Debug, PartialEq)]
@@ -71,12 +72,10 @@ impl Point {
     /// One physics step of 0.002 s.
     fn substep(&mut self, push: f64, spin: f64) {
         // Translation: m dv/dt = F h − c v, damping implicit.
-        let f = GEAR * push.clamp(-FORCE_LIMIT, FORCE_LIMIT);
-        let k = 1.0 / (1.0 + DT * SLIDE_DAMPING / MASS);
-        let (h, old) = (self.heading.dir(), self.vel);
+        let f = GEAR * push.clamp(-FORCE_LIMIT, FORCE_LIMIT) * DV_PER_N;
+        let h = self.heading.dir();
         for i in 0..2 {
-            self.vel[i] = (self.vel[i] + DT * f * h[i] / MASS) * k;
-            self.accel[i] = (self.vel[i] - old[i]) / DT;
+            self.vel[i] = (self.vel[i] + f * h[i]) * DAMP;
         }
         // Yaw: I dω/dt = 0.3·clamp(a1 − 0.3ω, ±0.05) − c ω, implicit in ω while the
         // servo is unsaturated.
@@ -119,16 +118,17 @@ impl Dynamics for Point {
     }
 
     fn advance(&mut self, action: &[f64], map: &Map, _goal: &[f64]) -> bool {
-        let t = DT * SUBSTEPS as f64;
-        let speed = self.vel[0].hypot(self.vel[1]);
-        let check = contact::needs_checks(map, &self.pos, RADIUS, speed * t + 0.5 * MAX_ACCEL * t * t + 1e-3);
+        let mut guard = ContactGuard::new(map, &self.pos, RADIUS);
         let mut collided = false;
+        let mut before = self.vel;
         for _ in 0..SUBSTEPS {
+            before = self.vel;
             self.substep(action[0], action[1]);
-            if check {
-                collided |= contact::resolve(map, &mut self.pos, &mut self.vel, RADIUS);
-            }
+            let travel = contact::travel_bound(&self.vel, DT);
+            collided |= guard.after_move(map, &mut self.pos, &mut self.vel, RADIUS, travel);
         }
+        // The accelerometer reads the last physics step's acceleration.
+        self.accel = [(self.vel[0] - before[0]) / DT, (self.vel[1] - before[1]) / DT];
         self.heading.normalize();
         collided
     }
