@@ -22,12 +22,16 @@ struct Cli {
 enum Command {
     /// Robustness of a spec on a trace (CSV: header names the signals, one row per step).
     Robustness(commands::robustness::Args),
+    /// Simulated robots and maps.
+    #[command(subcommand)]
+    Sim(commands::sim::Command),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Robustness(args) => commands::robustness::run(args),
+        Command::Sim(cmd) => commands::sim::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

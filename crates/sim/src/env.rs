@@ -161,6 +161,10 @@ pub trait Env: Send {
     fn goal(&self) -> &[f64];
     /// The robot's position in plan space.
     fn position(&self) -> &[f64];
+    /// The robot's heading: yaw about the vertical axis (rad).
+    fn heading(&self) -> f64;
+    /// Radius of the robot's collision shape (m).
+    fn radius(&self) -> f64;
     /// Writes the current observation.
     fn observe(&self, obs: &mut [f64]);
     /// Steps taken in this episode.
@@ -210,6 +214,8 @@ pub trait Dynamics: Send + Clone {
     fn advance(&mut self, action: &[f64], map: &Map, goal: &[f64]) -> bool;
     /// Position in plan space.
     fn plan_position(&self) -> &[f64];
+    /// Yaw about the vertical axis (rad).
+    fn yaw(&self) -> f64;
     /// Writes the observation for `goal`.
     fn observe(&self, goal: &[f64], obs: &mut [f64]);
 }
@@ -393,6 +399,14 @@ impl<D: Dynamics> Env for GoalEnv<D> {
 
     fn position(&self) -> &[f64] {
         self.robot.plan_position()
+    }
+
+    fn heading(&self) -> f64 {
+        self.robot.yaw()
+    }
+
+    fn radius(&self) -> f64 {
+        D::RADIUS
     }
 
     fn observe(&self, obs: &mut [f64]) {

@@ -21,6 +21,8 @@
 //! ```
 
 #![warn(missing_docs)]
+// Index loops mirror the equations of motion they implement.
+#![allow(clippy::needless_range_loop)]
 
 pub mod contact;
 pub mod env;

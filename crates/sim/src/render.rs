@@ -1,1 +1,315 @@
-pub fn placeholder() {}
+//! Pictures of a map with robots, goals, planned waypoints and executed
+//! trajectories, as PNG or SVG (chosen by the file extension).
+//!
+//! Ground maps are drawn from above. The Drone's world gets a top view (x, y) above
+//! a side view (x, z) at the same scale. Pictures carry no text, so no system fonts
+//! are needed: walls are grey, the duck yellow, goals green discs of their radius,
+//! planned waypoints blue dots joined by thin lines, executed trajectories orange,
+//! the robot a black circle with a line showing its heading.
+//!
+//! Files are written atomically (to a temporary name, then renamed) and an existing
+//! file is never replaced unless `overwrite` is set.
+
+use std::path::{Path, PathBuf};
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::map::Map;
+
+/// A goal region: centre (plan space) and radius.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Goal {
+    /// Centre.
+    pub center: Vec<f64>,
+    /// Radius (m).
+    pub radius: f64,
+}
+
+/// What a polyline shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PathKind {
+    /// Waypoints from a planner.
+    Planned,
+    /// Where the robot went.
+    Executed,
+}
+
+/// A sequence of plan-space points.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Polyline {
+    /// The points (each of the map's dimension).
+    pub points: Vec<Vec<f64>>,
+    /// Planned or executed.
+    pub kind: PathKind,
+}
+
+/// A robot drawn at a pose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobotMarker {
+    /// Position (plan space).
+    pub position: Vec<f64>,
+    /// Heading (rad, about z).
+    pub heading: f64,
+    /// Drawn radius (m).
+    pub radius: f64,
+}
+
+/// Everything drawn in one picture.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scene {
+    /// The map.
+    pub map: Map,
+    /// Goal regions.
+    pub goals: Vec<Goal>,
+    /// Planned and executed paths.
+    pub paths: Vec<Polyline>,
+    /// Robots.
+    pub robots: Vec<RobotMarker>,
+}
+
+impl Scene {
+    /// An empty scene on `map`.
+    pub fn new(map: Map) -> Self {
+        Self { map, goals: Vec::new(), paths: Vec::new(), robots: Vec::new() }
+    }
+}
+
+/// Why a picture could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// The output exists and overwriting was not asked for.
+    #[error("{0} already exists; pass --force to overwrite it")]
+    Exists(PathBuf),
+    /// The extension is neither `.png` nor `.svg`.
+    #[error("{0}: the output must end in .png or .svg")]
+    Format(PathBuf),
+    /// Drawing or writing failed.
+    #[error("{path}: {message}")]
+    Write {
+        /// The output.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+const PX_PER_M: f64 = 100.0;
+const WALL: RGBColor = RGBColor(90, 90, 96);
+const DUCK: RGBColor = RGBColor(240, 200, 40);
+const GOAL: RGBColor = RGBColor(40, 170, 80);
+const PLANNED: RGBColor = RGBColor(40, 90, 220);
+const EXECUTED: RGBColor = RGBColor(240, 120, 20);
+const GRID: RGBColor = RGBColor(232, 232, 236);
+
+/// Which two coordinates a panel shows.
+#[derive(Clone, Copy)]
+struct View {
+    axes: (usize, usize),
+    x: (f64, f64),
+    y: (f64, f64),
+}
+
+impl View {
+    fn size(&self) -> (u32, u32) {
+        let px = |r: f64| (r * PX_PER_M).clamp(1.0, 4000.0) as u32;
+        (px(self.x.1 - self.x.0), px(self.y.1 - self.y.0))
+    }
+
+    fn project(&self, p: &[f64]) -> (f64, f64) {
+        (p[self.axes.0], p.get(self.axes.1).copied().unwrap_or(0.0))
+    }
+}
+
+/// The panels of a scene: the map's default extent, grown to hold everything drawn.
+fn views(scene: &Scene) -> Vec<View> {
+    let base = match scene.map {
+        Map::Duck(_) => vec![
+            View { axes: (0, 1), x: (-3.2, 3.2), y: (-3.2, 3.2) },
+            View { axes: (0, 2), x: (-3.2, 3.2), y: (-0.2, 3.0) },
+        ],
+        _ => vec![View { axes: (0, 1), x: (-4.2, 4.2), y: (-4.2, 4.2) }],
+    };
+    let points = scene
+        .paths
+        .iter()
+        .flat_map(|p| p.points.iter().map(|q| (q.as_slice(), 0.3)))
+        .chain(scene.goals.iter().map(|g| (g.center.as_slice(), g.radius + 0.2)))
+        .chain(scene.robots.iter().map(|r| (r.position.as_slice(), r.radius + 0.2)));
+    let mut out = base;
+    for (p, pad) in points {
+        for v in &mut out {
+            let (a, b) = v.project(p);
+            if a.is_finite() && b.is_finite() {
+                v.x = (v.x.0.min(a - pad), v.x.1.max(a + pad));
+                v.y = (v.y.0.min(b - pad), v.y.1.max(b + pad));
+            }
+        }
+    }
+    // Panels stacked vertically share the horizontal extent.
+    let (x0, x1) =
+        out.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v.x.0), b.max(v.x.1)));
+    for v in &mut out {
+        v.x = (x0, x1);
+    }
+    out
+}
+
+fn circle_points(c: (f64, f64), r: f64) -> Vec<(f64, f64)> {
+    (0..40)
+        .map(|i| {
+            let a = i as f64 / 40.0 * std::f64::consts::TAU;
+            (c.0 + r * a.cos(), c.1 + r * a.sin())
+        })
+        .collect()
+}
+
+type Chart<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    view: View,
+    scene: &Scene,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let mut chart: Chart<'_, DB> =
+        ChartBuilder::on(area).build_cartesian_2d(view.x.0..view.x.1, view.y.0..view.y.1).map_err(err)?;
+    // A 1 m grid.
+    for k in (view.x.0.ceil() as i32)..=(view.x.1.floor() as i32) {
+        let k = k as f64;
+        chart
+            .draw_series(std::iter::once(PathElement::new(vec![(k, view.y.0), (k, view.y.1)], GRID)))
+            .map_err(err)?;
+    }
+    for k in (view.y.0.ceil() as i32)..=(view.y.1.floor() as i32) {
+        let k = k as f64;
+        chart
+            .draw_series(std::iter::once(PathElement::new(vec![(view.x.0, k), (view.x.1, k)], GRID)))
+            .map_err(err)?;
+    }
+    match &scene.map {
+        Map::Walls(w) => {
+            let rects = w.squares().map(|(c, h)| {
+                Rectangle::new([(c[0] - h[0], c[1] - h[1]), (c[0] + h[0], c[1] + h[1])], WALL.filled())
+            });
+            chart.draw_series(rects).map_err(err)?;
+        }
+        Map::Empty(_) => {}
+        Map::Duck(d) => {
+            if view.axes.1 == 2 {
+                let floor = Rectangle::new([(view.x.0, view.y.0), (view.x.1, 0.0)], WALL.filled());
+                chart.draw_series(std::iter::once(floor)).map_err(err)?;
+            }
+            // Each capsule as a chain of discs along its core segment.
+            for c in d.pieces() {
+                let discs = (0..=12).map(|i| {
+                    let t = i as f64 / 12.0;
+                    let p: Vec<f64> = (0..3).map(|k| c.a[k] + t * (c.b[k] - c.a[k])).collect();
+                    Polygon::new(circle_points(view.project(&p), c.radius), DUCK.filled())
+                });
+                chart.draw_series(discs).map_err(err)?;
+            }
+        }
+    }
+    for g in &scene.goals {
+        let pts = circle_points(view.project(&g.center), g.radius);
+        chart
+            .draw_series(std::iter::once(Polygon::new(pts.clone(), GOAL.mix(0.25).filled())))
+            .map_err(err)?;
+        let mut ring = pts;
+        ring.push(ring[0]);
+        chart.draw_series(std::iter::once(PathElement::new(ring, GOAL.stroke_width(2)))).map_err(err)?;
+    }
+    for path in &scene.paths {
+        let pts: Vec<(f64, f64)> = path.points.iter().map(|p| view.project(p)).collect();
+        match path.kind {
+            PathKind::Executed => {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(pts, EXECUTED.stroke_width(2))))
+                    .map_err(err)?;
+            }
+            PathKind::Planned => {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(pts.clone(), PLANNED.stroke_width(1))))
+                    .map_err(err)?;
+                chart
+                    .draw_series(pts.into_iter().map(|p| Circle::new(p, 4, PLANNED.filled())))
+                    .map_err(err)?;
+            }
+        }
+    }
+    for r in &scene.robots {
+        let c = view.project(&r.position);
+        let mut ring = circle_points(c, r.radius);
+        ring.push(ring[0]);
+        chart.draw_series(std::iter::once(Polygon::new(ring.clone(), WHITE.filled()))).map_err(err)?;
+        chart.draw_series(std::iter::once(PathElement::new(ring, BLACK.stroke_width(2)))).map_err(err)?;
+        if view.axes.1 == 1 {
+            let tip = (c.0 + 1.6 * r.radius * r.heading.cos(), c.1 + 1.6 * r.radius * r.heading.sin());
+            chart
+                .draw_series(std::iter::once(PathElement::new(vec![c, tip], BLACK.stroke_width(2))))
+                .map_err(err)?;
+        }
+    }
+    Ok(())
+}
+
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, scene: &Scene) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let vs = views(scene);
+    let mut rest = root.clone();
+    for v in vs {
+        let (_, h) = v.size();
+        let (panel, below) = rest.split_vertically(h);
+        draw_panel(&panel, v, scene)?;
+        rest = below;
+    }
+    root.present().map_err(|e| e.to_string())
+}
+
+/// The picture's size in pixels (100 px per metre, at most 4000 px a side).
+pub fn image_size(scene: &Scene) -> (u32, u32) {
+    let vs = views(scene);
+    let w = vs.iter().map(|v| v.size().0).max().unwrap_or(0);
+    (w, vs.iter().map(|v| v.size().1).sum())
+}
+
+/// Draws `scene` to `out` (`.png` or `.svg`); refuses to replace an existing file
+/// unless `overwrite`.
+pub fn save(scene: &Scene, out: &Path, overwrite: bool) -> Result<(), RenderError> {
+    let ext = out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if !matches!(ext.as_deref(), Some("png" | "svg")) {
+        return Err(RenderError::Format(out.to_path_buf()));
+    }
+    if out.exists() && !overwrite {
+        return Err(RenderError::Exists(out.to_path_buf()));
+    }
+    let ext = ext.unwrap();
+    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("scene");
+    let tmp = out.with_file_name(format!(".{stem}.{}.tmp.{ext}", std::process::id()));
+    let size = image_size(scene);
+    let result = if ext == "png" {
+        draw(BitMapBackend::new(&tmp, size).into_drawing_area(), scene)
+    } else {
+        draw(SVGBackend::new(&tmp, size).into_drawing_area(), scene)
+    };
+    let fail = |message: String| RenderError::Write { path: out.to_path_buf(), message };
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(fail(e));
+    }
+    std::fs::rename(&tmp, out).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        fail(e.to_string())
+    })
+}

@@ -210,6 +210,10 @@ impl Dynamics for Car {
         &self.pos
     }
 
+    fn yaw(&self) -> f64 {
+        self.heading.angle()
+    }
+
     fn observe(&self, goal: &[f64], obs: &mut [f64]) {
         let h = &self.heading;
         let [ax, ay] = h.to_body(self.accel);

@@ -249,6 +249,11 @@ impl Dynamics for Drone {
         &self.pos
     }
 
+    fn yaw(&self) -> f64 {
+        let r = self.att.matrix();
+        r[1][0].atan2(r[0][0])
+    }
+
     fn observe(&self, goal: &[f64], obs: &mut [f64]) {
         let r = self.att.matrix();
         let specific = [self.accel[0], self.accel[1], self.accel[2] + G];
