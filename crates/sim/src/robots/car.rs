@@ -195,7 +195,7 @@ impl Dynamics for Car {
             let travel = contact::travel_bound(&self.vel, DT);
             collided |= guard.after_move(map, &mut self.pos, &mut self.vel, RADIUS, travel);
         }
-        self.accel = [(self.vel[0] - before[0]) / DT, (self.vel[1] - before[1]) / DT];
+        self.accel = [(self.vel[0] - before[0]) * (1.0 / DT), (self.vel[1] - before[1]) * (1.0 / DT)];
         self.heading.normalize();
         // The caster rolls without slipping under its contact point's velocity.
         let [vx, vy] = self.vel;

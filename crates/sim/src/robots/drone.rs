@@ -53,6 +53,11 @@ const SUBSTEPS: usize = 5;
 const DT: f64 = CONTROL_DT / SUBSTEPS as f64;
 const RADIUS: f64 = 0.2;
 const TILT_LIMIT: f64 = std::f64::consts::PI / 6.0;
+// Reciprocals for the physics loop (a division by a constant stays a division).
+const INV_INERTIA: [f64; 3] = [1.0 / INERTIA[0], 1.0 / INERTIA[1], 1.0 / INERTIA[2]];
+const YAW_PER_FORCE: f64 = KM / KF;
+const ROLL_MIX: f64 = 1.0 / (2.0 * ARM);
+const YAW_MIX: f64 = 1.0 / (4.0 * YAW_PER_FORCE);
 const INTEGRAL_LIMIT: f64 = 2.0;
 
 /// Base PID gains: force P, I, D, torque P, I, D (3 axes each).
@@ -104,7 +109,7 @@ impl Drone {
         let f = rotors.map(|x| x.clamp(0.0, ROTOR_MAX));
         self.rotors = f;
         let thrust = f[0] + f[1] + f[2] + f[3];
-        let torque = [ARM * (f[1] - f[3]), ARM * (f[2] - f[0]), KM / KF * (-f[0] + f[1] - f[2] + f[3])];
+        let torque = [ARM * (f[1] - f[3]), ARM * (f[2] - f[0]), YAW_PER_FORCE * (-f[0] + f[1] - f[2] + f[3])];
         // Thrust along the body z axis (the matrix's third column), gravity down.
         let a = thrust / MASS;
         self.accel = [a * r[0][2], a * r[1][2], a * r[2][2] - G];
@@ -117,7 +122,7 @@ impl Drone {
         let iw = [INERTIA[0] * w[0], INERTIA[1] * w[1], INERTIA[2] * w[2]];
         let gyro = cross(w, iw);
         for i in 0..3 {
-            self.rate[i] += DT * (torque[i] - gyro[i]) / INERTIA[i];
+            self.rate[i] += DT * (torque[i] - gyro[i]) * INV_INERTIA[i];
         }
         self.att.integrate_body_unnormalized(self.rate, DT);
     }
@@ -147,7 +152,7 @@ impl Drone {
         force[2] += MASS * G;
         // Limit roll and pitch: the horizontal force may tilt the thrust by ≤ 30°.
         force[2] = force[2].max(1e-3);
-        let horizontal = force[0].hypot(force[1]);
+        let horizontal = (force[0] * force[0] + force[1] * force[1]).sqrt();
         let max_h = force[2] * TILT_LIMIT.tan();
         if horizontal > max_h {
             force[0] *= max_h / horizontal;
@@ -187,13 +192,9 @@ impl Drone {
             tau[i] =
                 -gains[9 + i] * err[i] - gains[12 + i] * self.att_integral[i] - gains[15 + i] * self.rate[i];
         }
-        let (q, k) = (thrust / 4.0, KM / KF);
-        [
-            q - tau[1] / (2.0 * ARM) - tau[2] / (4.0 * k),
-            q + tau[0] / (2.0 * ARM) + tau[2] / (4.0 * k),
-            q + tau[1] / (2.0 * ARM) - tau[2] / (4.0 * k),
-            q - tau[0] / (2.0 * ARM) + tau[2] / (4.0 * k),
-        ]
+        let q = 0.25 * thrust;
+        let (roll, pitch, yaw) = (tau[0] * ROLL_MIX, tau[1] * ROLL_MIX, tau[2] * YAW_MIX);
+        [q - pitch - yaw, q + roll + yaw, q + pitch - yaw, q - roll + yaw]
     }
 
     /// Rotor speeds (RPM) for the last rotor forces.
