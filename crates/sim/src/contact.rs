@@ -26,6 +26,21 @@ impl ContactGuard {
         Self { clearance: map.sdf(p) - radius }
     }
 
+    /// Counts `travel` metres of motion; `true` if the shape may now touch.
+    #[inline]
+    pub fn may_touch(&mut self, travel: f64) -> bool {
+        self.clearance -= travel;
+        self.clearance <= 0.0
+    }
+
+    /// Resolves contact (after [`ContactGuard::may_touch`] said it may touch) and
+    /// measures the clearance again; returns whether the shape touches.
+    pub fn resolve(&mut self, map: &Map, p: &mut [f64], v: &mut [f64], radius: f64) -> bool {
+        let touched = resolve(map, p, v, radius);
+        self.clearance = map.sdf(p) - radius;
+        touched
+    }
+
     /// After the shape moved by at most `travel` metres, resolves contact if it may
     /// touch; returns whether it touches.
     #[inline]

@@ -35,7 +35,7 @@
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::contact::{self, ContactGuard};
+use crate::contact::ContactGuard;
 use crate::env::{BoxSpace, Dynamics};
 use crate::map::Map;
 use crate::robots::{GRAVITY, Heading, MAGNETIC_FIELD};
@@ -101,60 +101,76 @@ impl Default for Car {
     }
 }
 
-impl Car {
-    fn substep(&mut self, torque: [f64; 2]) {
-        let [mut u, mut l] = self.heading.to_body(self.vel);
-        let mut w = self.yaw_rate;
-        // Traction of each wheel (left at +y, right at −y).
-        let mut long = [0.0; 2];
-        for (i, y) in [WHEEL_Y, -WHEEL_Y].into_iter().enumerate() {
-            let v_long = u - w * y;
-            let rolling = (torque[i] - WHEEL_DAMPING * v_long * INV_WHEEL_RADIUS) * INV_WHEEL_RADIUS;
-            if rolling.abs() <= MU * WHEEL_LOAD {
-                long[i] = rolling;
-                self.wheel_speed[i] = v_long * INV_WHEEL_RADIUS;
-            } else {
-                long[i] = MU * WHEEL_LOAD * rolling.signum();
-                self.wheel_speed[i] = (torque[i] - WHEEL_RADIUS * long[i]) * INV_WHEEL_DAMPING;
-            }
-        }
-        // Caster rolling drag, bounded by its friction.
-        let (cu, cl) = (u, l + w * CASTER_X);
-        let drag2 = CASTER_DRAG * CASTER_DRAG * (cu * cu + cl * cl);
-        let cap = if drag2 > (MU * CASTER_LOAD) * (MU * CASTER_LOAD) {
-            MU * CASTER_LOAD / drag2.sqrt()
-        } else {
-            1.0
-        };
-        let (fcu, fcl) = (-CASTER_DRAG * cu * cap, -CASTER_DRAG * cl * cap);
-        // Explicit update with the traction and drag forces.
-        let fx = long[0] + long[1] + fcu;
-        let tau = -WHEEL_Y * long[0] + WHEEL_Y * long[1] + CASTER_X * fcl;
-        u += DT * fx * INV_MASS;
-        l += DT * fcl * INV_MASS;
-        w += DT * tau * INV_INERTIA;
-        // Sideways friction: both wheels sit at the same x, so their contact points
-        // slide sideways at one speed; the impulse that stops it is bounded by the
-        // friction both wheels have left after traction (the fixed point of a
-        // Gauss–Seidel contact solve, in closed form).
-        let want = -(l + w * WHEEL_X) * LATERAL_MASS;
-        // √(a² − f²) ≥ a − |f|: when the impulse is within that bound, no root is needed.
-        let a = MU * WHEEL_LOAD;
-        let j = if want.abs() <= (2.0 * a - long[0].abs() - long[1].abs()) * DT {
-            want
-        } else {
-            let room = |f: f64| (a * a - f * f).max(0.0).sqrt();
-            let limit = (room(long[0]) + room(long[1])) * DT;
-            want.clamp(-limit, limit)
-        };
-        l += j * INV_MASS;
-        w += WHEEL_X * j * INV_INERTIA;
-        self.vel = self.heading.to_world([u, l]);
-        self.yaw_rate = w;
-        self.heading.rotate(w * DT);
-        self.pos[0] += DT * self.vel[0];
-        self.pos[1] += DT * self.vel[1];
+/// The planar state a physics step updates, held in registers across the steps of a
+/// control step (velocity in the body frame: forward `u`, left `l`).
+#[derive(Clone, Copy)]
+struct Planar {
+    pos: [f64; 2],
+    u: f64,
+    l: f64,
+    w: f64,
+    heading: Heading,
+}
+
+impl Planar {
+    fn world_vel(&self) -> [f64; 2] {
+        self.heading.to_world([self.u, self.l])
     }
+}
+
+/// The wheels' ground forces (left, right) for motor `torque` at body velocity
+/// (`u`, yaw rate `w`): traction of a massless wheel, or `μ N` when it slips.
+#[inline]
+fn traction(torque: [f64; 2], u: f64, w: f64) -> [f64; 2] {
+    let mut long = [0.0; 2];
+    for (i, y) in [WHEEL_Y, -WHEEL_Y].into_iter().enumerate() {
+        let v_long = u - w * y;
+        let rolling = (torque[i] - WHEEL_DAMPING * v_long * INV_WHEEL_RADIUS) * INV_WHEEL_RADIUS;
+        long[i] = if rolling.abs() <= MU * WHEEL_LOAD { rolling } else { MU * WHEEL_LOAD * rolling.signum() };
+    }
+    long
+}
+
+/// One physics step of 0.004 s.
+#[inline]
+fn substep(mut st: Planar, torque: [f64; 2]) -> Planar {
+    let (mut u, mut l, mut w) = (st.u, st.l, st.w);
+    let long = traction(torque, u, w);
+    // Caster rolling drag, bounded by its friction.
+    let (cu, cl) = (u, l + w * CASTER_X);
+    let drag2 = CASTER_DRAG * CASTER_DRAG * (cu * cu + cl * cl);
+    let cap =
+        if drag2 > (MU * CASTER_LOAD) * (MU * CASTER_LOAD) { MU * CASTER_LOAD / drag2.sqrt() } else { 1.0 };
+    let (fcu, fcl) = (-CASTER_DRAG * cu * cap, -CASTER_DRAG * cl * cap);
+    // Explicit update with the traction and drag forces.
+    let fx = long[0] + long[1] + fcu;
+    let tau = -WHEEL_Y * long[0] + WHEEL_Y * long[1] + CASTER_X * fcl;
+    u += DT * fx * INV_MASS;
+    l += DT * fcl * INV_MASS;
+    w += DT * tau * INV_INERTIA;
+    // Sideways friction: both wheels sit at the same x, so their contact points
+    // slide sideways at one speed; the impulse that stops it is bounded by the
+    // friction both wheels have left after traction (the fixed point of a
+    // Gauss–Seidel contact solve, in closed form).
+    let want = -(l + w * WHEEL_X) * LATERAL_MASS;
+    // √(a² − f²) ≥ a − |f|: when the impulse is within that bound, no root is needed.
+    let a = MU * WHEEL_LOAD;
+    let j = if want.abs() <= (2.0 * a - long[0].abs() - long[1].abs()) * DT {
+        want
+    } else {
+        let room = |f: f64| (a * a - f * f).max(0.0).sqrt();
+        let limit = (room(long[0]) + room(long[1])) * DT;
+        want.clamp(-limit, limit)
+    };
+    l += j * INV_MASS;
+    w += WHEEL_X * j * INV_INERTIA;
+    // Move in the world, then turn; the world velocity is unchanged by the turn, so
+    // its body-frame components rotate back by the same angle.
+    let [vx, vy] = st.heading.to_world([u, l]);
+    st.pos[0] += DT * vx;
+    st.pos[1] += DT * vy;
+    let (s, c) = st.heading.rotate(w * DT);
+    Planar { pos: st.pos, u: c * u + s * l, l: -s * u + c * l, w, heading: st.heading }
 }
 
 impl Dynamics for Car {
@@ -188,12 +204,31 @@ impl Dynamics for Car {
         let t = DT * SUBSTEPS as f64;
         let mut guard = ContactGuard::new(map, &self.pos, RADIUS);
         let mut collided = false;
+        let [u, l] = self.heading.to_body(self.vel);
+        let mut st = Planar { pos: self.pos, u, l, w: self.yaw_rate, heading: self.heading };
         let mut before = self.vel;
         for _ in 0..SUBSTEPS {
-            before = self.vel;
-            self.substep(torque);
-            let travel = contact::travel_bound(&self.vel, DT);
-            collided |= guard.after_move(map, &mut self.pos, &mut self.vel, RADIUS, travel);
+            before = st.world_vel();
+            st = substep(st, torque);
+            let travel = (st.u.abs() + st.l.abs()) * DT; // rotation-invariant L1 bound
+            if guard.may_touch(travel) {
+                let mut v = st.world_vel();
+                collided |= guard.resolve(map, &mut st.pos, &mut v, RADIUS);
+                [st.u, st.l] = st.heading.to_body(v);
+            }
+        }
+        self.pos = st.pos;
+        self.vel = st.world_vel();
+        self.yaw_rate = st.w;
+        self.heading = st.heading;
+        let long = traction(torque, st.u, st.w);
+        for i in 0..2 {
+            let v_long = st.u - st.w * [WHEEL_Y, -WHEEL_Y][i];
+            self.wheel_speed[i] = if long[i].abs() < MU * WHEEL_LOAD {
+                v_long * INV_WHEEL_RADIUS
+            } else {
+                (torque[i] - WHEEL_RADIUS * long[i]) * INV_WHEEL_DAMPING
+            };
         }
         self.accel = [(self.vel[0] - before[0]) * (1.0 / DT), (self.vel[1] - before[1]) * (1.0 / DT)];
         self.heading.normalize();

@@ -37,7 +37,8 @@ impl Heading {
 
     /// Turns by `dtheta`. Physics steps turn by milliradians, where a 4th-order
     /// Taylor expansion is exact to 1e-15; larger turns use `sin_cos`.
-    pub fn rotate(&mut self, dtheta: f64) {
+    /// Returns the turn's `(sin, cos)`, so that body-frame vectors can follow it.
+    pub fn rotate(&mut self, dtheta: f64) -> (f64, f64) {
         let (s, c) = if dtheta.abs() < 0.05 {
             let d2 = dtheta * dtheta;
             (
@@ -50,6 +51,7 @@ impl Heading {
         let (c0, s0) = (self.c, self.s);
         self.c = c0 * c - s0 * s;
         self.s = s0 * c + c0 * s;
+        (s, c)
     }
 
     /// Removes rounding drift from the unit length.
