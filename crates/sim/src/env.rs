@@ -203,10 +203,14 @@ pub trait Dynamics: Send + Clone {
     const REACH_RADIUS: f64;
     /// Radius of the robot's collision shape.
     const RADIUS: f64;
-    /// Action bounds.
-    fn action_space() -> BoxSpace;
-    /// Observation bounds.
-    fn observation_space() -> BoxSpace;
+    /// Action bounds: `[−1, 1]` in every dimension (all robots' control ranges).
+    fn action_space() -> BoxSpace {
+        BoxSpace::new(vec![-1.0; Self::ACT_DIM], vec![1.0; Self::ACT_DIM])
+    }
+    /// Observation bounds: unbounded (sensor readings are not clipped).
+    fn observation_space() -> BoxSpace {
+        BoxSpace::new(vec![f64::NEG_INFINITY; Self::OBS_DIM], vec![f64::INFINITY; Self::OBS_DIM])
+    }
     /// Puts the robot at rest at `start` (plan space) with a heading from `rng`.
     fn reset(&mut self, start: &[f64], rng: &mut ChaCha8Rng);
     /// Advances one control step under `action` (already clipped); returns whether

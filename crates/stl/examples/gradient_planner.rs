@@ -7,39 +7,18 @@
 //!
 //! Run: `cargo run --release -p schrl-stl --example gradient_planner`
 
-use stl::{AvoidBoxes, Ball, Semantics, Spec, parse};
+use stl::Semantics;
 
-const WALLS: [[f64; 2]; 17] = [
-    [0.0, 0.0],
-    [0.0, 0.5],
-    [0.0, 1.0],
-    [0.0, 3.0],
-    [0.0, 3.5],
-    [0.5, 0.0],
-    [1.0, 0.0],
-    [3.0, 0.0],
-    [3.5, 0.0],
-    [0.0, -0.5],
-    [0.0, -1.0],
-    [0.0, -3.0],
-    [0.0, -3.5],
-    [-0.5, 0.0],
-    [-1.0, 0.0],
-    [-3.0, 0.0],
-    [-3.5, 0.0],
-];
+// The five Point task specs, shared with the benchmarks.
+#[path = "../benches/point_tasks.rs"]
+#[allow(dead_code)]
+mod point_tasks;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let formula = parse("F[1,2] g0 & F[3,4] g1 & F[5,6] g2 & F[7,8] g3 & G[1,8] safe")?;
-    let goals = [[2.0, 2.0], [-1.0, 2.0], [-2.0, -1.0], [1.0, -2.0]];
-    let walls = AvoidBoxes::cubes(&WALLS.map(|c| c.to_vec()), 0.25, 0.1);
-    let spec = (0..4)
-        .fold(Spec::builder(formula).signals(["x", "y"]).bind("safe", walls), |b, i| {
-            b.bind(format!("g{i}"), Ball::new(goals[i], 0.5))
-        })
-        .build()?;
+    let seq = point_tasks::point_tasks().into_iter().find(|t| t.name == "seq").expect("the Seq task");
+    let spec = seq.spec;
 
-    let (steps, dim) = (9, 2);
+    let (steps, dim) = (seq.steps, 2);
     let mut rng = 0x2545F4914F6CDD1Du64;
     let mut uniform = move || {
         rng ^= rng << 13;

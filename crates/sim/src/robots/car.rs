@@ -32,13 +32,12 @@
 //! and its angular velocity in the chassis frame (3), then the goal vector in the
 //! robot frame (2).
 
-use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::contact::ContactGuard;
-use crate::env::{BoxSpace, Dynamics};
+use crate::env::Dynamics;
 use crate::map::Map;
-use crate::robots::{GRAVITY, Heading, MAGNETIC_FIELD};
+use crate::robots::{GRAVITY, Heading, MAGNETIC_FIELD, random_yaw};
 use crate::rotation::{Quat, apply_t};
 
 const DT: f64 = 0.004;
@@ -181,16 +180,8 @@ impl Dynamics for Car {
     const REACH_RADIUS: f64 = 0.3;
     const RADIUS: f64 = RADIUS;
 
-    fn action_space() -> BoxSpace {
-        BoxSpace::new(vec![-1.0; 2], vec![1.0; 2])
-    }
-
-    fn observation_space() -> BoxSpace {
-        BoxSpace::new(vec![f64::NEG_INFINITY; 26], vec![f64::INFINITY; 26])
-    }
-
     fn reset(&mut self, start: &[f64], rng: &mut ChaCha8Rng) {
-        let yaw = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
+        let yaw = random_yaw(rng);
         *self = Car {
             pos: [start[0], start[1]],
             heading: Heading::new(yaw),

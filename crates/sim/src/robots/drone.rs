@@ -26,13 +26,12 @@
 //! force), velocimeter, gyro, magnetometer, the world's up axis, and the goal
 //! vector, 3 each.
 
-use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::contact::{self, ContactGuard};
-use crate::env::{BoxSpace, Dynamics};
+use crate::env::Dynamics;
 use crate::map::Map;
-use crate::robots::MAGNETIC_FIELD;
+use crate::robots::{MAGNETIC_FIELD, random_yaw};
 use crate::rotation::{Quat, apply, apply_t, cross};
 
 /// Gravity of the reference Drone (m/s²).
@@ -211,18 +210,10 @@ impl Dynamics for Drone {
     const REACH_RADIUS: f64 = 0.6;
     const RADIUS: f64 = RADIUS;
 
-    fn action_space() -> BoxSpace {
-        BoxSpace::new(vec![-1.0; 18], vec![1.0; 18])
-    }
-
-    fn observation_space() -> BoxSpace {
-        BoxSpace::new(vec![f64::NEG_INFINITY; 18], vec![f64::INFINITY; 18])
-    }
-
     fn reset(&mut self, start: &[f64], rng: &mut ChaCha8Rng) {
         *self = Drone {
             pos: [start[0], start[1], start[2]],
-            att: Quat::from_yaw(rng.random_range(-std::f64::consts::PI..std::f64::consts::PI)),
+            att: Quat::from_yaw(random_yaw(rng)),
             ..Drone::default()
         };
     }

@@ -10,6 +10,12 @@ pub const GRAVITY: f64 = 9.81;
 /// MuJoCo's default global magnetic field (T), read by the magnetometers.
 pub const MAGNETIC_FIELD: [f64; 3] = [0.0, -0.5, 0.0];
 
+/// A heading drawn uniformly from (−π, π], for resets.
+pub fn random_yaw(rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
+    use rand::Rng;
+    rng.random_range(-std::f64::consts::PI..std::f64::consts::PI)
+}
+
 /// A planar heading kept as a unit vector, turned by small angles without calling
 /// `sin`/`cos` in the physics loop.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -25,13 +25,12 @@
 //! y left, z up; accelerometer includes +9.81 on z; the magnetic field is MuJoCo's
 //! default (0, −0.5, 0)), then the goal vector in the robot frame (2).
 
-use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::contact::{self, ContactGuard};
-use crate::env::{BoxSpace, Dynamics};
+use crate::env::Dynamics;
 use crate::map::Map;
-use crate::robots::{GRAVITY, Heading, MAGNETIC_FIELD};
+use crate::robots::{GRAVITY, Heading, MAGNETIC_FIELD, random_yaw};
 
 const DT: f64 = 0.002;
 const SUBSTEPS: usize = 10;
@@ -101,20 +100,9 @@ impl Dynamics for Point {
     const REACH_RADIUS: f64 = 0.3;
     const RADIUS: f64 = RADIUS;
 
-    fn action_space() -> BoxSpace {
-        BoxSpace::new(vec![-1.0; 2], vec![1.0; 2])
-    }
-
-    fn observation_space() -> BoxSpace {
-        BoxSpace::new(vec![f64::NEG_INFINITY; 14], vec![f64::INFINITY; 14])
-    }
-
     fn reset(&mut self, start: &[f64], rng: &mut ChaCha8Rng) {
-        *self = Point {
-            pos: [start[0], start[1]],
-            heading: Heading::new(rng.random_range(-std::f64::consts::PI..std::f64::consts::PI)),
-            ..Point::default()
-        };
+        *self =
+            Point { pos: [start[0], start[1]], heading: Heading::new(random_yaw(rng)), ..Point::default() };
     }
 
     fn advance(&mut self, action: &[f64], map: &Map, _goal: &[f64]) -> bool {
