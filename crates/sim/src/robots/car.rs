@@ -131,9 +131,17 @@ fn traction(torque: [f64; 2], u: f64, w: f64) -> [f64; 2] {
 }
 
 /// One physics step of 0.004 s.
+///
+/// The chassis first turns by the yaw rate it starts the step with (the frame
+/// rotation then runs alongside the force computation instead of after it, which
+/// keeps the step's serial chain of operations short); forces, friction and the
+/// move follow. Both orders are first-order accurate; the turn conserves speed.
 #[inline]
 fn substep(mut st: Planar, torque: [f64; 2]) -> Planar {
-    let (mut u, mut l, mut w) = (st.u, st.l, st.w);
+    // Turning the frame leaves the world velocity unchanged: its body-frame
+    // components rotate back by the same angle.
+    let (s, c) = st.heading.rotate(st.w * DT);
+    let (mut u, mut l, mut w) = (c * st.u + s * st.l, -s * st.u + c * st.l, st.w);
     let long = traction(torque, u, w);
     // Caster rolling drag, bounded by its friction.
     let (cu, cl) = (u, l + w * CASTER_X);
@@ -163,13 +171,10 @@ fn substep(mut st: Planar, torque: [f64; 2]) -> Planar {
     };
     l += j * INV_MASS;
     w += WHEEL_X * j * INV_INERTIA;
-    // Move in the world, then turn; the world velocity is unchanged by the turn, so
-    // its body-frame components rotate back by the same angle.
     let [vx, vy] = st.heading.to_world([u, l]);
     st.pos[0] += DT * vx;
     st.pos[1] += DT * vy;
-    let (s, c) = st.heading.rotate(w * DT);
-    Planar { pos: st.pos, u: c * u + s * l, l: -s * u + c * l, w, heading: st.heading }
+    Planar { pos: st.pos, u, l, w, heading: st.heading }
 }
 
 impl Dynamics for Car {
