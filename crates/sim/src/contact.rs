@@ -36,8 +36,8 @@ impl ContactGuard {
     /// Resolves contact (after [`ContactGuard::may_touch`] said it may touch) and
     /// measures the clearance again; returns whether the shape touches.
     pub fn resolve(&mut self, map: &Map, p: &mut [f64], v: &mut [f64], radius: f64) -> bool {
-        let touched = resolve(map, p, v, radius);
-        self.clearance = map.sdf(p) - radius;
+        let (touched, clearance) = resolve_with_clearance(map, p, v, radius);
+        self.clearance = clearance;
         touched
     }
 
@@ -45,13 +45,10 @@ impl ContactGuard {
     /// touch; returns whether it touches.
     #[inline]
     pub fn after_move(&mut self, map: &Map, p: &mut [f64], v: &mut [f64], radius: f64, travel: f64) -> bool {
-        self.clearance -= travel;
-        if self.clearance > 0.0 {
+        if !self.may_touch(travel) {
             return false;
         }
-        let touched = resolve(map, p, v, radius);
-        self.clearance = map.sdf(p) - radius;
-        touched
+        self.resolve(map, p, v, radius)
     }
 }
 
@@ -66,26 +63,33 @@ pub fn travel_bound(v: &[f64], dt: f64) -> f64 {
 /// (two walls meeting) pushing out of one wall can push into the other, so the
 /// resolution repeats until the shape is clear (a few passes at most).
 pub fn resolve(map: &Map, p: &mut [f64], v: &mut [f64], radius: f64) -> bool {
-    let mut touched = false;
-    for _ in 0..8 {
-        if !resolve_once(map, p, v, radius) {
-            break;
-        }
-        touched = true;
-    }
-    touched
+    resolve_with_clearance(map, p, v, radius).0
 }
 
-fn resolve_once(map: &Map, p: &mut [f64], v: &mut [f64], radius: f64) -> bool {
+/// [`resolve`], also returning the clearance left afterwards (distance to the
+/// nearest obstacle minus `radius`, from the last map query).
+fn resolve_with_clearance(map: &Map, p: &mut [f64], v: &mut [f64], radius: f64) -> (bool, f64) {
+    let mut touched = false;
+    for _ in 0..8 {
+        match resolve_once(map, p, v, radius) {
+            Ok(()) => touched = true,
+            Err(clearance) => return (touched, clearance),
+        }
+    }
+    (touched, map.sdf(p) - radius)
+}
+
+/// Pushes the shape out once; `Err(clearance)` if it was not touching.
+fn resolve_once(map: &Map, p: &mut [f64], v: &mut [f64], radius: f64) -> Result<(), f64> {
     let mut n = [0.0; 3];
     let d = map.sdf_grad(p, &mut n);
     if d > radius {
-        return false;
+        return Err(d - radius);
     }
     let k = p.len();
     let nn = n[..k].iter().map(|x| x * x).sum::<f64>().sqrt();
     if nn == 0.0 {
-        return true;
+        return Ok(());
     }
     for x in &mut n[..k] {
         *x /= nn;
@@ -108,5 +112,5 @@ fn resolve_once(map: &Map, p: &mut [f64], v: &mut [f64], radius: f64) -> bool {
             }
         }
     }
-    true
+    Ok(())
 }

@@ -153,6 +153,9 @@ impl Capsule {
 #[derive(Clone, Debug, PartialEq)]
 pub struct DuckWorld {
     pieces: [Capsule; 3],
+    // A sphere holding the whole duck: its distance bounds the duck's from below.
+    bound_center: [f64; 3],
+    bound_radius: f64,
 }
 
 impl Default for DuckWorld {
@@ -165,13 +168,27 @@ impl DuckWorld {
     /// The duck: body from x = −0.5 to 0.5 of radius 0.55 resting on the floor, head
     /// of radius 0.4 at height 1.45, beak pointing along +x. Top at 1.85 m.
     pub fn new() -> Self {
-        Self {
-            pieces: [
-                Capsule { a: [-0.5, 0.0, 0.55], b: [0.5, 0.0, 0.55], radius: 0.55 },
-                Capsule { a: [0.45, 0.0, 1.45], b: [0.45, 0.0, 1.45], radius: 0.4 },
-                Capsule { a: [0.8, 0.0, 1.4], b: [1.1, 0.0, 1.36], radius: 0.1 },
-            ],
+        Self::from_pieces([
+            Capsule { a: [-0.5, 0.0, 0.55], b: [0.5, 0.0, 0.55], radius: 0.55 },
+            Capsule { a: [0.45, 0.0, 1.45], b: [0.45, 0.0, 1.45], radius: 0.4 },
+            Capsule { a: [0.8, 0.0, 1.4], b: [1.1, 0.0, 1.36], radius: 0.1 },
+        ])
+    }
+
+    /// A duck made of `pieces`, with its bounding sphere.
+    pub fn from_pieces(pieces: [Capsule; 3]) -> Self {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for c in &pieces {
+            for k in 0..3 {
+                lo[k] = lo[k].min(c.a[k].min(c.b[k]) - c.radius);
+                hi[k] = hi[k].max(c.a[k].max(c.b[k]) + c.radius);
+            }
         }
+        let bound_center = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])];
+        let half = [hi[0] - bound_center[0], hi[1] - bound_center[1], hi[2] - bound_center[2]];
+        let bound_radius = (half[0] * half[0] + half[1] * half[1] + half[2] * half[2]).sqrt();
+        Self { pieces, bound_center, bound_radius }
     }
 
     /// Signed distance to the duck alone (not the floor), with gradient.
@@ -260,7 +277,11 @@ impl Map {
                 f64::INFINITY
             }
             Map::Duck(d) => {
-                let duck = d.duck_sdf(p, g);
+                // The duck is no nearer than its bounding sphere: when the floor is
+                // nearer than that, the floor is the answer (the common case).
+                let c = d.bound_center;
+                let to_c = ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt();
+                let duck = if to_c - d.bound_radius >= p[2] { f64::INFINITY } else { d.duck_sdf(p, g) };
                 if p[2] < duck {
                     g[..3].copy_from_slice(&[0.0, 0.0, 1.0]);
                     p[2]

@@ -26,6 +26,7 @@ impl Quat {
     }
 
     /// The product `self ⊗ o` (apply `o` first).
+    #[inline]
     pub fn mul(&self, o: &Quat) -> Quat {
         let (a, b) = (self.v, o.v);
         Quat {
@@ -47,6 +48,7 @@ impl Quat {
 
     /// [`Quat::integrate_body`] without the final renormalisation, for physics loops
     /// that renormalise once per control step.
+    #[inline]
     pub fn integrate_body_unnormalized(&mut self, omega: [f64; 3], dt: f64) {
         *self = self.mul(&Self::step(omega, dt));
     }
@@ -61,6 +63,7 @@ impl Quat {
     /// `h = |ω| dt / 2 < 0.3` (every physics step, and a rolling caster over a
     /// control step) Taylor series in `h²` to degree 10 give `cos h` and
     /// `sin(h)/h` to 2e-12 without a square root or `sin_cos`.
+    #[inline]
     fn step(omega: [f64; 3], dt: f64) -> Quat {
         let n2 = omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2];
         let h2 = 0.25 * n2 * dt * dt;
@@ -102,6 +105,7 @@ impl Quat {
     }
 
     /// The rotation matrix, row-major (`world = R · body`).
+    #[inline]
     pub fn matrix(&self) -> [[f64; 3]; 3] {
         let (w, [x, y, z]) = (self.w, self.v);
         [
@@ -113,6 +117,7 @@ impl Quat {
 }
 
 /// `R · v`.
+#[inline]
 pub fn apply(r: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [
         r[0][0] * v[0] + r[0][1] * v[1] + r[0][2] * v[2],
@@ -122,6 +127,7 @@ pub fn apply(r: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
 }
 
 /// `Rᵀ · v` (world to body).
+#[inline]
 pub fn apply_t(r: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [
         r[0][0] * v[0] + r[1][0] * v[1] + r[2][0] * v[2],
@@ -131,6 +137,7 @@ pub fn apply_t(r: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
 }
 
 /// `a × b`.
+#[inline]
 pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }

@@ -132,3 +132,24 @@ fn walls_sdf_is_exact_and_its_gradient_matches() {
     assert!(duck.sdf(&[0.45, 0.0, 1.45]) < 0.0, "inside the head");
     assert!((duck.sdf(&[0.45, 0.0, 2.35]) - 0.5).abs() < 1e-12, "0.5 above the head");
 }
+
+#[test]
+fn duck_world_distance_is_the_nearer_of_floor_and_duck_everywhere() {
+    // The map skips the duck when its bounding sphere is farther than the floor;
+    // that shortcut must never change the answer.
+    let world = sim::DuckWorld::new();
+    let map = Map::Duck(world.clone());
+    let mut s = 12345u64;
+    let mut next = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..20_000 {
+        let p = [next() * 8.0 - 4.0, next() * 8.0 - 4.0, next() * 4.0 - 0.5];
+        let mut g = [0.0; 3];
+        let want = p[2].min(world.duck_sdf(&p, &mut g));
+        assert_eq!(map.sdf(&p), want, "{p:?}");
+    }
+}

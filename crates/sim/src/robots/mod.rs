@@ -37,6 +37,7 @@ impl Heading {
     }
 
     /// The unit vector.
+    #[inline]
     pub fn dir(&self) -> [f64; 2] {
         [self.c, self.s]
     }
@@ -44,6 +45,7 @@ impl Heading {
     /// Turns by `dtheta`. Physics steps turn by milliradians, where a 4th-order
     /// Taylor expansion is exact to 1e-15; larger turns use `sin_cos`.
     /// Returns the turn's `(sin, cos)`, so that body-frame vectors can follow it.
+    #[inline]
     pub fn rotate(&mut self, dtheta: f64) -> (f64, f64) {
         let (s, c) = if dtheta.abs() < 0.05 {
             let d2 = dtheta * dtheta;
@@ -68,11 +70,13 @@ impl Heading {
     }
 
     /// A world-frame vector in the body frame (x forward, y left).
+    #[inline]
     pub fn to_body(&self, v: [f64; 2]) -> [f64; 2] {
         [self.c * v[0] + self.s * v[1], -self.s * v[0] + self.c * v[1]]
     }
 
     /// A body-frame vector in the world frame.
+    #[inline]
     pub fn to_world(&self, v: [f64; 2]) -> [f64; 2] {
         [self.c * v[0] - self.s * v[1], self.s * v[0] + self.c * v[1]]
     }
