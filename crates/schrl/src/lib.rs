@@ -1,0 +1,12 @@
+//! Learning in schrl: tasks, the GRU-ODE planning policy, and the
+//! specification-constrained policy gradient (paper §3).
+//!
+//! * [`tasks`] — the five task types for Point with their specs and goals.
+//! * [`planner`] — the GRU-ODE Gaussian planner (Eq. 3).
+//! * [`cpg`] — the constrained policy gradient with a Lagrange multiplier (Eq. 4).
+
+#![warn(missing_docs)]
+
+pub mod cpg;
+pub mod planner;
+pub mod tasks;

@@ -1,0 +1,149 @@
+//! The GRU-ODE planning policy (paper §3.2, Eq. 3, App. F).
+//!
+//! From a start `g0`, a GRU cell reads the current waypoint and its hidden state;
+//! the next waypoint's mean is the current one plus a bounded step,
+//! `μ_{i+1} = g_i + bound · tanh(W h_{i+1})` (an Euler step of a neural ODE with
+//! step 1, so gradients pass along the path as in a ResNet). The policy is Gaussian,
+//! `g_{i+1} ~ N(μ_{i+1}, σ_{i+1})` with `σ = |V h_{i+1}| + σ_min`, sampled with the
+//! reparameterisation `g = μ + σ ε`, so that a path is differentiable in the
+//! parameters (the constraint term of Eq. 4 needs it) and has a log-probability
+//! (the policy-gradient term needs that).
+//!
+//! Defaults from the reference setup: hidden size 64, one layer, step bound 10,
+//! `σ_min` = 0.1.
+
+use candle_core::{D, Result, Tensor};
+use candle_nn::rnn::{GRU, GRUConfig, GRUState, RNN, gru};
+use candle_nn::{Linear, Module, VarBuilder, linear};
+
+/// Shape and constants of a planner.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlannerConfig {
+    /// Plan-space dimension (2 or 3).
+    pub dim: usize,
+    /// GRU hidden size (reference: 64).
+    pub hidden: usize,
+    /// Largest waypoint step, `bound · tanh(·)` (reference: 10).
+    pub bound: f64,
+    /// Smallest standard deviation (reference: 0.1).
+    pub min_std: f64,
+}
+
+impl PlannerConfig {
+    /// The reference setup's planner for `dim`-dimensional plans.
+    pub fn reference(dim: usize) -> Self {
+        Self { dim, hidden: 64, bound: 10.0, min_std: 0.1 }
+    }
+}
+
+/// Sampled paths and their log-probabilities.
+#[derive(Debug, Clone)]
+pub struct PlanBatch {
+    /// `[batch, steps + 1, dim]`, index 0 the start; differentiable in the parameters.
+    pub paths: Tensor,
+    /// `[batch]`, `log π(path)`.
+    pub log_prob: Tensor,
+}
+
+/// The GRU-ODE Gaussian planner.
+pub struct GruOdePlanner {
+    cell: GRU,
+    mean_head: Linear,
+    std_head: Linear,
+    cfg: PlannerConfig,
+}
+
+const HALF_LN_TAU: f64 = 0.918_938_533_204_672_8; // ½ ln 2π
+
+impl GruOdePlanner {
+    /// A planner with parameters in `vb`.
+    pub fn new(cfg: PlannerConfig, vb: VarBuilder) -> Result<Self> {
+        Ok(Self {
+            cell: gru(cfg.dim, cfg.hidden, GRUConfig::default(), vb.pp("gru"))?,
+            mean_head: linear(cfg.hidden, cfg.dim, vb.pp("mean"))?,
+            std_head: linear(cfg.hidden, cfg.dim, vb.pp("std"))?,
+            cfg,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PlannerConfig {
+        &self.cfg
+    }
+
+    /// One step: from waypoint `g` `[batch, dim]` and the hidden state, the next
+    /// waypoint's mean and standard deviation.
+    fn step(&self, g: &Tensor, state: &GRUState) -> Result<(Tensor, Tensor, GRUState)> {
+        let state = self.cell.step(g, state)?;
+        let h = state.h();
+        let mean = (g + (self.mean_head.forward(h)?.tanh()? * self.cfg.bound)?)?;
+        let std = (self.std_head.forward(h)?.abs()? + self.cfg.min_std)?;
+        Ok((mean, std, state))
+    }
+
+    fn zero_state(&self, g0: &Tensor) -> Result<GRUState> {
+        self.cell.zero_state(g0.dim(0)?)
+    }
+
+    /// Samples one path per start in `g0` (`[batch, dim]`) with standard-normal
+    /// `noise` (`[batch, steps, dim]`): `g_{i+1} = μ + σ ε_i`.
+    pub fn sample(&self, g0: &Tensor, noise: &Tensor) -> Result<PlanBatch> {
+        let steps = noise.dim(1)?;
+        let mut state = self.zero_state(g0)?;
+        let mut g = g0.clone();
+        let mut points = vec![g0.clone()];
+        let mut log_prob = Tensor::zeros(g0.dim(0)?, g0.dtype(), g0.device())?;
+        for i in 0..steps {
+            let (mean, std, next) = self.step(&g, &state)?;
+            let eps = noise.narrow(1, i, 1)?.squeeze(1)?;
+            g = (mean + (&std * &eps)?)?;
+            // log N(g; μ, σ) = −ε²/2 − ln σ − ½ ln 2π, per dimension.
+            let lp = ((eps.sqr()? * -0.5)? - std.log()?)?.affine(1.0, -HALF_LN_TAU)?;
+            log_prob = (log_prob + lp.sum(D::Minus1)?)?;
+            points.push(g.clone());
+            state = next;
+        }
+        Ok(PlanBatch { paths: Tensor::stack(&points, 1)?, log_prob })
+    }
+
+    /// The mean path (no sampling): `[batch, steps + 1, dim]`.
+    pub fn mean_path(&self, g0: &Tensor, steps: usize) -> Result<Tensor> {
+        let mut state = self.zero_state(g0)?;
+        let mut g = g0.clone();
+        let mut points = vec![g0.clone()];
+        for _ in 0..steps {
+            let (mean, _, next) = self.step(&g, &state)?;
+            g = mean;
+            points.push(g.clone());
+            state = next;
+        }
+        Tensor::stack(&points, 1)
+    }
+
+    /// The Gaussian of every step of given paths `[batch, steps + 1, dim]`, each step
+    /// conditioned on the path's own previous waypoints: `(means, stds)`, both
+    /// `[batch, steps, dim]`.
+    pub fn distributions(&self, paths: &Tensor) -> Result<(Tensor, Tensor)> {
+        let steps = paths.dim(1)? - 1;
+        let g0 = paths.narrow(1, 0, 1)?.squeeze(1)?;
+        let mut state = self.zero_state(&g0)?;
+        let (mut means, mut stds) = (Vec::with_capacity(steps), Vec::with_capacity(steps));
+        for i in 0..steps {
+            let g = paths.narrow(1, i, 1)?.squeeze(1)?;
+            let (mean, std, next) = self.step(&g, &state)?;
+            means.push(mean);
+            stds.push(std);
+            state = next;
+        }
+        Ok((Tensor::stack(&means, 1)?, Tensor::stack(&stds, 1)?))
+    }
+
+    /// `log π(path)` of given paths `[batch, steps + 1, dim]`: `[batch]`.
+    pub fn log_prob(&self, paths: &Tensor) -> Result<Tensor> {
+        let steps = paths.dim(1)? - 1;
+        let (means, stds) = self.distributions(paths)?;
+        let z = ((paths.narrow(1, 1, steps)? - means)? / &stds)?;
+        let lp = ((z.sqr()? * -0.5)? - stds.log()?)?.affine(1.0, -HALF_LN_TAU)?;
+        lp.sum(D::Minus1)?.sum(D::Minus1)
+    }
+}

@@ -1,0 +1,118 @@
+//! The planner and the constrained policy gradient.
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use schrl::cpg::{CpgConfig, Lagrangian, Method, PlanTrainer, seeded_init};
+use schrl::planner::{GruOdePlanner, PlannerConfig};
+use schrl::tasks::{Task, TaskKind};
+
+fn tiny_planner(seed: u64) -> GruOdePlanner {
+    let varmap = VarMap::new();
+    let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
+    let p = GruOdePlanner::new(PlannerConfig { dim: 2, hidden: 4, bound: 2.0, min_std: 0.1 }, vb).unwrap();
+    seeded_init(&varmap, seed).unwrap();
+    p
+}
+
+#[test]
+fn path_log_probability_matches_a_hand_computation() {
+    let planner = tiny_planner(3);
+    let g0 = Tensor::new(&[[0.5f32, -0.5], [1.0, 2.0]], &Device::Cpu).unwrap();
+    let noise = Tensor::new(
+        &[[[0.3f32, -1.2], [0.7, 0.1], [-0.4, 2.0]], [[1.5, 0.2], [-0.9, -0.3], [0.0, 0.8]]],
+        &Device::Cpu,
+    )
+    .unwrap();
+    let batch = planner.sample(&g0, &noise).unwrap();
+    // The same paths scored step by step: Σ log N(x; μ, σ) with μ, σ from the planner.
+    let (means, stds) = planner.distributions(&batch.paths).unwrap();
+    let paths = batch.paths.to_vec3::<f32>().unwrap();
+    let (means, stds) = (means.to_vec3::<f32>().unwrap(), stds.to_vec3::<f32>().unwrap());
+    let eps = noise.to_vec3::<f32>().unwrap();
+    let sampled = batch.log_prob.to_vec1::<f32>().unwrap();
+    let scored = planner.log_prob(&batch.paths).unwrap().to_vec1::<f32>().unwrap();
+    for b in 0..2 {
+        let mut hand = 0.0f64;
+        for t in 0..3 {
+            for d in 0..2 {
+                let (x, m, s) = (paths[b][t + 1][d] as f64, means[b][t][d] as f64, stds[b][t][d] as f64);
+                // The sample is μ + σ ε.
+                assert!((x - (m + s * eps[b][t][d] as f64)).abs() < 1e-5);
+                hand += -0.5 * ((x - m) / s).powi(2) - s.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln();
+            }
+        }
+        assert!((sampled[b] as f64 - hand).abs() < 1e-4, "{} vs {hand}", sampled[b]);
+        assert!((scored[b] as f64 - hand).abs() < 1e-4, "{} vs {hand}", scored[b]);
+    }
+}
+
+#[test]
+fn waypoint_steps_are_bounded() {
+    let planner = tiny_planner(1);
+    let g0 = Tensor::new(&[[0.0f32, 0.0]], &Device::Cpu).unwrap();
+    let path = planner.mean_path(&g0, 5).unwrap().to_vec3::<f32>().unwrap();
+    for w in path[0].windows(2) {
+        for (next, now) in w[1].iter().zip(&w[0]) {
+            assert!((next - now).abs() <= 2.0 + 1e-6, "bound · tanh keeps steps within the bound");
+        }
+    }
+}
+
+#[test]
+fn lambda_rises_while_violated_and_returns_to_zero_when_slack() {
+    let mut l = Lagrangian { lambda: 0.0, lr: 0.5, epsilon: 0.1 };
+    for _ in 0..10 {
+        l.update(-1.0);
+    }
+    assert!((l.lambda - 5.5).abs() < 1e-12, "10 steps of 0.5 · 1.1: {}", l.lambda);
+    let mut last = l.lambda;
+    while l.lambda > 0.0 {
+        l.update(1.0);
+        assert!(l.lambda < last);
+        last = l.lambda;
+    }
+    l.update(2.0);
+    assert_eq!(l.lambda, 0.0, "λ stays at 0 while the constraint holds with slack");
+}
+
+fn train(kind: TaskKind, method: Method, updates: usize) -> (f64, f64) {
+    let cfg = CpgConfig { method, batch: 32, seed: 7, ..CpgConfig::default() };
+    let mut t = PlanTrainer::new(Task::point(kind), cfg).unwrap();
+    let before = t.satisfaction(200).unwrap();
+    for _ in 0..updates {
+        t.update().unwrap();
+    }
+    (before, t.satisfaction(200).unwrap())
+}
+
+#[test]
+fn constrained_policy_gradient_learns_the_sequence_task() {
+    let (before, after) = train(TaskKind::Seq, Method::Cpg, 150);
+    assert!(before < 0.05, "an untrained planner rarely satisfies Seq: {before}");
+    assert!(after > 0.8, "after 150 updates most sampled paths satisfy Seq: {after}");
+}
+
+#[test]
+fn same_seed_same_training() {
+    let run = || {
+        let mut t = PlanTrainer::new(
+            Task::point(TaskKind::Branch),
+            CpgConfig { batch: 16, seed: 5, ..CpgConfig::default() },
+        )
+        .unwrap();
+        (0..5).map(|_| t.update().unwrap().loss).collect::<Vec<_>>()
+    };
+    assert_eq!(run(), run());
+}
+
+#[test]
+fn task_specs_parse_bind_and_round_trip() {
+    for kind in TaskKind::ALL {
+        let task = Task::point(kind);
+        let f = task.formula();
+        assert_eq!(stl::parse(&f.to_string()).unwrap(), f);
+        let spec = task.spec();
+        let path = vec![1.5; (task.steps + 1) * 2];
+        assert!(spec.robustness(&path, &stl::Semantics::hard()).unwrap().is_finite());
+    }
+}
