@@ -37,7 +37,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::contact::ContactGuard;
 use crate::env::Dynamics;
 use crate::map::Map;
-use crate::robots::{GRAVITY, Heading, MAGNETIC_FIELD, random_yaw};
+use crate::robots::{GRAVITY, Heading, planar_sensors, random_yaw};
 use crate::rotation::{Quat, apply_t};
 
 const DT: f64 = 0.004;
@@ -247,24 +247,12 @@ impl Dynamics for Car {
 
     fn observe(&self, goal: &[f64], obs: &mut [f64]) {
         let h = &self.heading;
-        let [ax, ay] = h.to_body(self.accel);
-        let [vx, vy] = h.to_body(self.vel);
-        let [mx, my] = h.to_body([MAGNETIC_FIELD[0], MAGNETIC_FIELD[1]]);
-        let [gx, gy] = h.to_body([goal[0] - self.pos[0], goal[1] - self.pos[1]]);
-        obs[..12].copy_from_slice(&[
-            ax,
-            ay,
-            GRAVITY,
-            vx,
-            vy,
-            0.0,
-            0.0,
-            0.0,
-            self.yaw_rate,
-            mx,
-            my,
-            MAGNETIC_FIELD[2],
-        ]);
+        // Inertial sensors in 0..12, the caster in 12..24, the goal vector in 24..26.
+        let mut imu = [0.0; 14];
+        let to_goal = [goal[0] - self.pos[0], goal[1] - self.pos[1]];
+        planar_sensors(h, self.accel, self.vel, self.yaw_rate, to_goal, &mut imu);
+        obs[..12].copy_from_slice(&imu[..12]);
+        obs[24..26].copy_from_slice(&imu[12..]);
         // Caster relative to the chassis: R_chassisᵀ R_ball, with R_chassis the yaw
         // rotation by the heading (no trigonometry needed).
         let [c, s] = h.dir();
@@ -277,6 +265,5 @@ impl Dynamics for Car {
         let r = [[h.dir()[0], -h.dir()[1], 0.0], [h.dir()[1], h.dir()[0], 0.0], [0.0, 0.0, 1.0]];
         let rate = [self.caster_rate[0], self.caster_rate[1], self.caster_rate[2] - self.yaw_rate];
         obs[21..24].copy_from_slice(&apply_t(&r, rate));
-        obs[24..26].copy_from_slice(&[gx, gy]);
     }
 }

@@ -10,6 +10,39 @@ pub const GRAVITY: f64 = 9.81;
 /// MuJoCo's default global magnetic field (T), read by the magnetometers.
 pub const MAGNETIC_FIELD: [f64; 3] = [0.0, -0.5, 0.0];
 
+/// The inertial sensors of a planar robot, in its frame (x forward, y left, z up):
+/// accelerometer (with +g on z, as MuJoCo's reads specific force), velocimeter, gyro,
+/// magnetometer; then the goal vector. Writes 14 numbers.
+pub fn planar_sensors(
+    h: &Heading,
+    accel: [f64; 2],
+    vel: [f64; 2],
+    yaw_rate: f64,
+    to_goal: [f64; 2],
+    out: &mut [f64],
+) {
+    let [ax, ay] = h.to_body(accel);
+    let [vx, vy] = h.to_body(vel);
+    let [mx, my] = h.to_body([MAGNETIC_FIELD[0], MAGNETIC_FIELD[1]]);
+    let [gx, gy] = h.to_body(to_goal);
+    out[..14].copy_from_slice(&[
+        ax,
+        ay,
+        GRAVITY,
+        vx,
+        vy,
+        0.0,
+        0.0,
+        0.0,
+        yaw_rate,
+        mx,
+        my,
+        MAGNETIC_FIELD[2],
+        gx,
+        gy,
+    ]);
+}
+
 /// A heading drawn uniformly from (−π, π], for resets.
 pub fn random_yaw(rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
     use rand::Rng;

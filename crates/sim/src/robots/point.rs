@@ -30,7 +30,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::contact::{self, ContactGuard};
 use crate::env::Dynamics;
 use crate::map::Map;
-use crate::robots::{GRAVITY, Heading, MAGNETIC_FIELD, random_yaw};
+use crate::robots::{Heading, planar_sensors, random_yaw};
 
 const DT: f64 = 0.002;
 const SUBSTEPS: usize = 10;
@@ -130,26 +130,7 @@ impl Dynamics for Point {
     }
 
     fn observe(&self, goal: &[f64], obs: &mut [f64]) {
-        let h = &self.heading;
-        let [ax, ay] = h.to_body(self.accel);
-        let [vx, vy] = h.to_body(self.vel);
-        let [mx, my] = h.to_body([MAGNETIC_FIELD[0], MAGNETIC_FIELD[1]]);
-        let [gx, gy] = h.to_body([goal[0] - self.pos[0], goal[1] - self.pos[1]]);
-        obs.copy_from_slice(&[
-            ax,
-            ay,
-            GRAVITY,
-            vx,
-            vy,
-            0.0,
-            0.0,
-            0.0,
-            self.yaw_rate,
-            mx,
-            my,
-            MAGNETIC_FIELD[2],
-            gx,
-            gy,
-        ]);
+        let to_goal = [goal[0] - self.pos[0], goal[1] - self.pos[1]];
+        planar_sensors(&self.heading, self.accel, self.vel, self.yaw_rate, to_goal, obs);
     }
 }
