@@ -25,6 +25,9 @@ enum Command {
     /// Simulated robots and maps.
     #[command(subcommand)]
     Sim(commands::sim::Command),
+    /// Spec-constrained planners: train, sample.
+    #[command(subcommand)]
+    Plan(commands::plan::Command),
 }
 
 fn main() -> ExitCode {
@@ -32,6 +35,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Robustness(args) => commands::robustness::run(args),
         Command::Sim(cmd) => commands::sim::run(cmd),
+        Command::Plan(cmd) => commands::plan::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

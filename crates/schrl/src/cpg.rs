@@ -228,6 +228,11 @@ impl PlanTrainer {
         &self.task
     }
 
+    /// The training configuration.
+    pub fn config(&self) -> &CpgConfig {
+        &self.cfg
+    }
+
     /// The dual variable.
     pub fn lagrangian(&self) -> Lagrangian {
         self.lagrangian

@@ -4,9 +4,11 @@
 //! * [`tasks`] — the five task types for Point with their specs and goals.
 //! * [`planner`] — the GRU-ODE Gaussian planner (Eq. 3).
 //! * [`cpg`] — the constrained policy gradient with a Lagrange multiplier (Eq. 4).
+//! * [`checkpoint`] — saving and loading trained planners.
 
 #![warn(missing_docs)]
 
+pub mod checkpoint;
 pub mod cpg;
 pub mod planner;
 pub mod tasks;

@@ -116,3 +116,45 @@ fn task_specs_parse_bind_and_round_trip() {
         assert!(spec.robustness(&path, &stl::Semantics::hard()).unwrap().is_finite());
     }
 }
+
+#[test]
+fn checkpoint_round_trip_gives_the_same_paths() {
+    let mut t = PlanTrainer::new(
+        Task::point(TaskKind::Seq),
+        CpgConfig { batch: 16, seed: 2, ..CpgConfig::default() },
+    )
+    .unwrap();
+    for _ in 0..3 {
+        t.update().unwrap();
+    }
+    let dir = std::env::temp_dir().join(format!("schrl-ckpt-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let meta = schrl::checkpoint::PlannerMeta {
+        robot: "point".into(),
+        task: "seq".into(),
+        method: "cpg".into(),
+        semantics: "soft:2".into(),
+        seed: 2,
+        updates: 3,
+        lambda: t.lagrangian().lambda,
+        dim: 2,
+        hidden: 64,
+        bound: 10.0,
+        min_std: 0.1,
+    };
+    schrl::checkpoint::save(&dir, &t, &meta, false).unwrap();
+    assert!(matches!(
+        schrl::checkpoint::save(&dir, &t, &meta, false),
+        Err(schrl::checkpoint::CheckpointError::Exists(_))
+    ));
+    let loaded = schrl::checkpoint::load(&dir).unwrap();
+    assert_eq!(loaded.meta, meta);
+    let g0 = Tensor::new(&[[1.5f32, -1.5]], &Device::Cpu).unwrap();
+    let a = t.planner().mean_path(&g0, 8).unwrap().to_vec3::<f32>().unwrap();
+    let b = loaded.planner.mean_path(&g0, 8).unwrap().to_vec3::<f32>().unwrap();
+    assert_eq!(a, b);
+    // A corrupt metadata file is a clear error naming the file.
+    std::fs::write(dir.join("planner.json"), "{ not json").unwrap();
+    let err = schrl::checkpoint::load(&dir).err().unwrap().to_string();
+    assert!(err.contains("planner.json"), "{err}");
+}

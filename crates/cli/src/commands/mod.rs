@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod plan;
 pub mod robustness;
 pub mod sim;
 pub mod spec_text;

@@ -1,0 +1,186 @@
+//! `schrl plan`: train the GRU-ODE planner on a task and sample from it.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use schrl::checkpoint::{self, PlannerMeta};
+use schrl::cpg::{CpgConfig, Method, PlanTrainer};
+use schrl::tasks::{Task, TaskKind};
+use sim::render::{Goal, PathKind, Polyline, Scene};
+use stl::Semantics;
+
+/// Subcommands of `schrl plan`.
+#[derive(clap::Subcommand, Debug)]
+pub enum Command {
+    /// Train a planner with the constrained (or plain) policy gradient.
+    Train(TrainArgs),
+    /// Sample paths from a trained planner and report how many satisfy the spec.
+    Sample(SampleArgs),
+}
+
+/// Arguments of `schrl plan train`.
+#[derive(clap::Args, Debug)]
+pub struct TrainArgs {
+    /// Robot (planner tasks exist for point).
+    #[arg(long, default_value = "point")]
+    robot: String,
+    /// Task: seq, cover, branch, loop or signal.
+    #[arg(long)]
+    task: TaskKind,
+    /// cpg (constrained policy gradient) or pg (policy gradient only).
+    #[arg(long, default_value = "cpg", value_parser = parse_method)]
+    method: Method,
+    /// Semantics of the spec in the loss: hard, soft:<alpha> or lse:<temperature>.
+    #[arg(long, default_value = "soft:2")]
+    semantics: Semantics,
+    /// Seed of parameters, starts and noise.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Most gradient updates.
+    #[arg(long, default_value_t = 3000)]
+    updates: usize,
+    /// Stop once this fraction of sampled paths satisfies the spec.
+    #[arg(long, default_value_t = 0.95)]
+    target: f64,
+    /// Checkpoint directory (metrics.jsonl is written there too).
+    #[arg(long)]
+    out: PathBuf,
+    /// Replace an existing checkpoint.
+    #[arg(long)]
+    force: bool,
+}
+
+/// Arguments of `schrl plan sample`.
+#[derive(clap::Args, Debug)]
+pub struct SampleArgs {
+    /// Checkpoint directory.
+    #[arg(long)]
+    ckpt: PathBuf,
+    /// Paths to sample.
+    #[arg(long, default_value_t = 100)]
+    n: usize,
+    /// Seed of starts and noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Draw the sampled paths (at most 20) on the map to this PNG or SVG.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Replace the picture if it exists.
+    #[arg(long)]
+    force: bool,
+}
+
+fn parse_method(s: &str) -> Result<Method, String> {
+    match s {
+        "cpg" => Ok(Method::Cpg),
+        "pg" => Ok(Method::Pg),
+        other => Err(format!("unknown method '{other}': expected cpg or pg")),
+    }
+}
+
+/// Runs `schrl plan ...`.
+pub fn run(cmd: Command) -> Result<()> {
+    match cmd {
+        Command::Train(args) => train(args),
+        Command::Sample(args) => sample(args),
+    }
+}
+
+fn train(args: TrainArgs) -> Result<()> {
+    if args.robot != "point" {
+        bail!("planner tasks exist for the point robot only so far, not '{}'", args.robot);
+    }
+    if !(0.0..=1.0).contains(&args.target) {
+        bail!("--target must be a fraction in [0, 1], got {}", args.target);
+    }
+    if !args.force && args.out.join("planner.json").exists() {
+        bail!("{} already holds a checkpoint; pass --force to replace it", args.out.display());
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    let metrics_path = args.out.join("metrics.jsonl");
+    let mut metrics = std::fs::File::create(&metrics_path)
+        .with_context(|| format!("cannot write {}", metrics_path.display()))?;
+    let cfg =
+        CpgConfig { method: args.method, semantics: args.semantics, seed: args.seed, ..CpgConfig::default() };
+    let mut trainer = PlanTrainer::new(Task::point(args.task), cfg)?;
+    let bar = ProgressBar::new(args.updates as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} updates {msg}").expect("valid template"),
+    );
+    let start = std::time::Instant::now();
+    let mut done = 0;
+    let mut reached = false;
+    for update in 1..=args.updates {
+        let s = trainer.update()?;
+        done = update;
+        writeln!(
+            metrics,
+            "{}",
+            serde_json::json!({
+                "update": update, "satisfaction": s.satisfaction, "mean_rho": s.mean_rho,
+                "lambda": s.lambda, "loss": s.loss, "seconds": start.elapsed().as_secs_f64(),
+            })
+        )?;
+        bar.set_position(update as u64);
+        bar.set_message(format!("satisfaction {:.2} λ {:.2}", s.satisfaction, s.lambda));
+        // Confirm on fresh paths before stopping, so one lucky batch does not end training.
+        if s.satisfaction >= args.target && trainer.satisfaction(200)? >= args.target {
+            reached = true;
+            break;
+        }
+    }
+    bar.finish_and_clear();
+    let meta = PlannerMeta {
+        robot: args.robot.clone(),
+        task: args.task.name().into(),
+        method: if args.method == Method::Cpg { "cpg" } else { "pg" }.into(),
+        semantics: args.semantics.to_string(),
+        seed: args.seed,
+        updates: done,
+        lambda: trainer.lagrangian().lambda,
+        dim: trainer.planner().config().dim,
+        hidden: trainer.planner().config().hidden,
+        bound: trainer.planner().config().bound,
+        min_std: trainer.planner().config().min_std,
+    };
+    checkpoint::save(&args.out, &trainer, &meta, args.force)?;
+    let satisfaction = trainer.satisfaction(200)?;
+    println!(
+        "{} after {done} updates ({:.1} s); checkpoint in {}",
+        if reached { "reached the target" } else { "stopped at the update limit" },
+        start.elapsed().as_secs_f64(),
+        args.out.display()
+    );
+    println!("updates: {done}");
+    println!("satisfaction: {satisfaction}");
+    Ok(())
+}
+
+fn sample(args: SampleArgs) -> Result<()> {
+    let loaded = checkpoint::load(&args.ckpt)?;
+    let task = loaded.task.clone();
+    let cfg = CpgConfig { seed: args.seed, ..CpgConfig::default() };
+    // A trainer supplies the task's start and noise sampling; its own weights are unused.
+    let mut sampler = PlanTrainer::new(task.clone(), cfg)?;
+    let g0 = sampler.sample_starts(args.n)?;
+    let noise = sampler.sample_noise(args.n)?;
+    let batch = loaded.planner.sample(&g0, &noise)?;
+    let rho = sampler.hard_robustness(&batch.paths)?;
+    let satisfied = rho.iter().filter(|r| **r > 0.0).count();
+    if let Some(out) = &args.out {
+        let mut scene = Scene::new(task.map.clone());
+        scene.goals =
+            task.goals.iter().map(|g| Goal { center: g.center.clone(), radius: g.radius }).collect();
+        let paths: Vec<Vec<Vec<f32>>> = batch.paths.to_vec3()?;
+        for p in paths.iter().take(20) {
+            let points = p.iter().map(|w| w.iter().map(|&x| x as f64).collect()).collect();
+            scene.paths.push(Polyline { points, kind: PathKind::Planned });
+        }
+        sim::render::save(&scene, out, args.force)?;
+        println!("wrote {}", out.display());
+    }
+    println!("satisfaction: {}", satisfied as f64 / args.n.max(1) as f64);
+    Ok(())
+}

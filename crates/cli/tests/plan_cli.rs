@@ -1,0 +1,45 @@
+//! `schrl plan train` and `schrl plan sample` end to end.
+
+use std::process::Command;
+
+fn schrl(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_schrl")).env("RAYON_NUM_THREADS", "1").args(args).output().expect("runs")
+}
+
+fn last_value(out: &std::process::Output, key: &str) -> f64 {
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line =
+        text.lines().rev().find(|l| l.starts_with(key)).unwrap_or_else(|| panic!("no '{key}' in {text}"));
+    line[key.len()..].trim().parse().unwrap()
+}
+
+#[test]
+fn trains_saves_refuses_to_clobber_and_samples() {
+    let dir = std::env::temp_dir().join(format!("schrl-plan-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = dir.to_str().unwrap();
+    let o = schrl(&["plan", "train", "--task", "seq", "--seed", "0", "--updates", "400", "--out", out]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(last_value(&o, "satisfaction:") > 0.8);
+    assert!(dir.join("planner.safetensors").exists() && dir.join("metrics.jsonl").exists());
+    let lines = std::fs::read_to_string(dir.join("metrics.jsonl")).unwrap();
+    assert_eq!(lines.lines().count() as f64, last_value(&o, "updates:"));
+    // A second run must not replace the checkpoint silently.
+    let o = schrl(&["plan", "train", "--task", "seq", "--updates", "1", "--out", out]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--force"));
+    let png = dir.join("paths.png");
+    let o = schrl(&["plan", "sample", "--ckpt", out, "--n", "100", "--out", png.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(last_value(&o, "satisfaction:") > 0.8);
+    assert!(std::fs::metadata(&png).unwrap().len() > 1000);
+}
+
+#[test]
+fn bad_arguments_are_clear_errors() {
+    let o = schrl(&["plan", "train", "--task", "dance", "--out", "x"]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown task 'dance'"));
+    let o = schrl(&["plan", "train", "--task", "seq", "--robot", "car", "--out", "x"]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("point robot only"));
+    let o = schrl(&["plan", "sample", "--ckpt", "/nonexistent/ckpt"]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("planner.json"));
+}
