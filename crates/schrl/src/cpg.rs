@@ -21,12 +21,11 @@ use candle_core::{DType, Device, Result, Tensor};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW, VarBuilder, VarMap};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, StandardNormal};
 use stl::Semantics;
 use stl::tensor::TensorSpec;
 
 use crate::planner::{GruOdePlanner, PlannerConfig};
-use crate::tasks::Task;
+use crate::tasks::{self, Task};
 
 /// The dual variable of the spec constraint `ρ ≥ ε`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -238,36 +237,16 @@ impl PlanTrainer {
         self.lagrangian
     }
 
-    /// `n` starts drawn uniformly from the task's start region: `[n, dim]`.
-    pub fn sample_starts(&mut self, n: usize) -> Result<Tensor> {
-        let (lo, hi) = &self.task.start;
-        let dim = lo.len();
-        let v: Vec<f32> =
-            (0..n * dim).map(|i| self.rng.random_range(lo[i % dim]..hi[i % dim]) as f32).collect();
-        Tensor::from_vec(v, (n, dim), &Device::Cpu)
-    }
-
-    /// Standard-normal noise `[n, steps, dim]`.
-    pub fn sample_noise(&mut self, n: usize) -> Result<Tensor> {
-        let dim = self.task.map.dim();
-        let steps = self.task.steps;
-        let v: Vec<f32> = (0..n * steps * dim).map(|_| StandardNormal.sample(&mut self.rng)).collect();
-        Tensor::from_vec(v, (n, steps, dim), &Device::Cpu)
-    }
-
     /// Hard-semantics robustness of each path in a `[n, steps+1, dim]` tensor.
     pub fn hard_robustness(&self, paths: &Tensor) -> Result<Vec<f64>> {
-        let flat: Vec<f64> = paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
-        self.hard
-            .robustness_batch(&flat, self.task.steps + 1, &Semantics::hard())
-            .map_err(candle_core::Error::msg)
+        tasks::hard_robustness(&self.hard, paths)
     }
 
     /// One update on a fresh batch of sampled paths.
     pub fn update(&mut self) -> Result<UpdateStats> {
         let (b, steps, dim) = (self.cfg.batch, self.task.steps, self.task.map.dim());
-        let g0 = self.sample_starts(b)?;
-        let noise = self.sample_noise(b)?;
+        let g0 = self.task.sample_starts(&mut self.rng, b)?;
+        let noise = self.task.sample_noise(&mut self.rng, b)?;
         let batch = self.planner.sample(&g0, &noise)?;
         let rho = self.spec.robustness(&batch.paths, &self.cfg.semantics)?;
         let rho_v: Vec<f64> = rho.to_dtype(DType::F64)?.to_vec1()?;
@@ -309,8 +288,8 @@ impl PlanTrainer {
 
     /// Fraction of `n` freshly sampled paths that satisfy the spec (hard ρ > 0).
     pub fn satisfaction(&mut self, n: usize) -> Result<f64> {
-        let g0 = self.sample_starts(n)?;
-        let noise = self.sample_noise(n)?;
+        let g0 = self.task.sample_starts(&mut self.rng, n)?;
+        let noise = self.task.sample_noise(&mut self.rng, n)?;
         let batch = self.planner.sample(&g0, &noise)?;
         let hard = self.hard_robustness(&batch.paths)?;
         Ok(hard.iter().filter(|r| **r > 0.0).count() as f64 / n as f64)

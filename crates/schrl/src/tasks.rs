@@ -10,6 +10,10 @@
 
 use std::sync::Arc;
 
+use candle_core::{DType, Device, Tensor};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
 use sim::Map;
 use stl::tensor::TensorSpec;
 use stl::{AfterStep, Ball, Formula, Predicate, Spec};
@@ -206,6 +210,21 @@ impl Task {
         out
     }
 
+    /// `n` starts drawn uniformly from the start region: `[n, dim]`.
+    pub fn sample_starts(&self, rng: &mut ChaCha8Rng, n: usize) -> candle_core::Result<Tensor> {
+        let (lo, hi) = &self.start;
+        let dim = lo.len();
+        let v: Vec<f32> = (0..n * dim).map(|i| rng.random_range(lo[i % dim]..hi[i % dim]) as f32).collect();
+        Tensor::from_vec(v, (n, dim), &Device::Cpu)
+    }
+
+    /// Standard-normal planner noise for `n` paths: `[n, steps, dim]`.
+    pub fn sample_noise(&self, rng: &mut ChaCha8Rng, n: usize) -> candle_core::Result<Tensor> {
+        let dim = self.map.dim();
+        let v: Vec<f32> = (0..n * self.steps * dim).map(|_| StandardNormal.sample(rng)).collect();
+        Tensor::from_vec(v, (n, self.steps, dim), &Device::Cpu)
+    }
+
     /// The spec for single paths (plain Rust, exact gradients).
     pub fn spec(&self) -> Spec {
         let dim = self.map.dim();
@@ -266,4 +285,12 @@ impl Predicate for MapClearance {
     fn required_dim(&self) -> usize {
         self.map.dim()
     }
+}
+
+/// Hard-semantics robustness of each path of a `[n, steps+1, dim]` tensor under `spec`
+/// (a path satisfies the spec when it is positive).
+pub fn hard_robustness(spec: &Spec, paths: &Tensor) -> candle_core::Result<Vec<f64>> {
+    let steps = paths.dim(1)?;
+    let flat: Vec<f64> = paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
+    spec.robustness_batch(&flat, steps, &stl::Semantics::hard()).map_err(candle_core::Error::msg)
 }

@@ -219,9 +219,6 @@ impl SpecBuilder {
                 }
             }
         }
-        for p in &predicates {
-            debug_assert!(p.required_dim() <= state_dim);
-        }
         Ok(Spec { formula: self.formula, program, predicates, state_dim, signals: self.signals })
     }
 }
@@ -384,10 +381,7 @@ impl Evaluator<'_> {
         if path.is_empty() {
             return Err(EvalError::Empty);
         }
-        if dim == 0 {
-            return Err(EvalError::Shape { len: path.len(), dim });
-        }
-        if path.len() % dim != 0 {
+        if dim == 0 || path.len() % dim != 0 {
             return Err(EvalError::Shape { len: path.len(), dim });
         }
         Ok(path.len() / dim)

@@ -5,6 +5,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 use schrl::checkpoint::{self, PlannerMeta};
 use schrl::cpg::{CpgConfig, Method, PlanTrainer};
 use schrl::tasks::{Task, TaskKind};
@@ -160,14 +162,12 @@ fn train(args: TrainArgs) -> Result<()> {
 
 fn sample(args: SampleArgs) -> Result<()> {
     let loaded = checkpoint::load(&args.ckpt)?;
-    let task = loaded.task.clone();
-    let cfg = CpgConfig { seed: args.seed, ..CpgConfig::default() };
-    // A trainer supplies the task's start and noise sampling; its own weights are unused.
-    let mut sampler = PlanTrainer::new(task.clone(), cfg)?;
-    let g0 = sampler.sample_starts(args.n)?;
-    let noise = sampler.sample_noise(args.n)?;
+    let task = &loaded.task;
+    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
+    let g0 = task.sample_starts(&mut rng, args.n)?;
+    let noise = task.sample_noise(&mut rng, args.n)?;
     let batch = loaded.planner.sample(&g0, &noise)?;
-    let rho = sampler.hard_robustness(&batch.paths)?;
+    let rho = schrl::tasks::hard_robustness(&task.spec(), &batch.paths)?;
     let satisfied = rho.iter().filter(|r| **r > 0.0).count();
     if let Some(out) = &args.out {
         let mut scene = Scene::new(task.map.clone());
