@@ -120,7 +120,7 @@ pub enum EnvError {
     #[error("unknown robot '{0}': expected one of point, car, drone (doggo needs the `mujoco` feature)")]
     UnknownRobot(String),
     /// An unknown map name.
-    #[error("unknown map '{0}': expected one of walls, empty, duck")]
+    #[error("unknown map '{0}': expected one of walls, empty, duck, floor")]
     UnknownMap(String),
     /// A robot on a map of the wrong dimension.
     #[error("the {robot} needs a {needs}-D map, but '{map}' is {has}-D")]
@@ -133,6 +133,14 @@ pub enum EnvError {
         needs: usize,
         /// The map's dimension.
         has: usize,
+    },
+    /// A saved state that is not a state of this robot (or is corrupt).
+    #[error("cannot restore a {robot} environment from the saved state: {reason}")]
+    BadState {
+        /// Robot name.
+        robot: &'static str,
+        /// What is wrong.
+        reason: String,
     },
 }
 
@@ -173,6 +181,12 @@ pub trait Env: Send {
     fn set_max_steps(&mut self, max_steps: usize);
     /// A random free goal from the environment's generator (used by trainers).
     fn sample_goal(&mut self) -> Vec<f64>;
+    /// The whole mutable state (robot, goal, counters, random stream) as JSON, so a
+    /// training run can be checkpointed and resumed exactly.
+    fn save_state(&self) -> String;
+    /// Restores a state written by [`Env::save_state`] for the same robot; on error
+    /// the environment is unchanged.
+    fn restore_state(&mut self, state: &str) -> Result<(), EnvError>;
 
     /// [`Env::reset_into`], returning the observation.
     fn reset(&mut self, seed: u64, start: Option<&[f64]>) -> Result<Vec<f64>, EnvError> {
@@ -190,7 +204,7 @@ pub trait Env: Send {
 }
 
 /// A robot's equations of motion and sensors, wrapped by [`GoalEnv`].
-pub trait Dynamics: Send + Clone {
+pub trait Dynamics: Send + Clone + serde::Serialize + serde::de::DeserializeOwned {
     /// Robot name.
     const NAME: &'static str;
     /// Observation length.
@@ -428,4 +442,48 @@ impl<D: Dynamics> Env for GoalEnv<D> {
     fn sample_goal(&mut self) -> Vec<f64> {
         self.free_point()
     }
+
+    fn save_state(&self) -> String {
+        let state = SavedState {
+            robot_name: D::NAME.to_string(),
+            robot: self.robot.clone(),
+            goal: self.goal.clone(),
+            prev_dist: self.prev_dist,
+            goal_reached: self.goal_reached,
+            steps: self.steps,
+            max_steps: self.max_steps,
+            rng: self.rng.clone(),
+        };
+        serde_json::to_string(&state).expect("environment states are plain numbers")
+    }
+
+    fn restore_state(&mut self, state: &str) -> Result<(), EnvError> {
+        let bad = |reason: String| EnvError::BadState { robot: D::NAME, reason };
+        let s: SavedState<D> = serde_json::from_str(state).map_err(|e| bad(e.to_string()))?;
+        if s.robot_name != D::NAME {
+            return Err(bad(format!("it is the state of a {}", s.robot_name)));
+        }
+        Self::check_point("goal", &s.goal)?;
+        self.robot = s.robot;
+        self.goal = s.goal;
+        self.prev_dist = s.prev_dist;
+        self.goal_reached = s.goal_reached;
+        self.steps = s.steps;
+        self.max_steps = s.max_steps;
+        self.rng = s.rng;
+        Ok(())
+    }
+}
+
+/// What [`Env::save_state`] writes.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct SavedState<D> {
+    robot_name: String,
+    robot: D,
+    goal: Vec<f64>,
+    prev_dist: f64,
+    goal_reached: bool,
+    steps: usize,
+    max_steps: usize,
+    rng: ChaCha8Rng,
 }

@@ -220,18 +220,21 @@ pub enum Map {
     Empty(EmptyMap),
     /// Floor and duck (3-D).
     Duck(DuckWorld),
+    /// The floor alone (3-D): open space where a general Drone controller learns.
+    Floor,
 }
 
 /// The maps by name, for command lines and task files.
-pub const MAP_NAMES: [&str; 3] = ["walls", "empty", "duck"];
+pub const MAP_NAMES: [&str; 4] = ["walls", "empty", "duck", "floor"];
 
 impl Map {
-    /// The map called `name` (`walls`, `empty` or `duck`).
+    /// The map called `name` (`walls`, `empty`, `duck` or `floor`).
     pub fn by_name(name: &str) -> Option<Map> {
         match name {
             "walls" => Some(Map::Walls(WallsMap::new())),
             "empty" => Some(Map::Empty(EmptyMap)),
             "duck" => Some(Map::Duck(DuckWorld::new())),
+            "floor" => Some(Map::Floor),
             _ => None,
         }
     }
@@ -242,12 +245,13 @@ impl Map {
             Map::Walls(_) => "walls",
             Map::Empty(_) => "empty",
             Map::Duck(_) => "duck",
+            Map::Floor => "floor",
         }
     }
 
-    /// 2 for the ground maps, 3 for the duck world.
+    /// 2 for the ground maps, 3 for the duck world and the floor.
     pub fn dim(&self) -> usize {
-        if matches!(self, Map::Duck(_)) { 3 } else { 2 }
+        if matches!(self, Map::Duck(_) | Map::Floor) { 3 } else { 2 }
     }
 
     /// Signed distance from `p` (length [`Map::dim`]) to the nearest obstacle.
@@ -276,6 +280,10 @@ impl Map {
                 g[..2].fill(0.0);
                 f64::INFINITY
             }
+            Map::Floor => {
+                g[..3].copy_from_slice(&[0.0, 0.0, 1.0]);
+                p[2]
+            }
             Map::Duck(d) => {
                 // The duck is no nearer than its bounding sphere: when the floor is
                 // nearer than that, the floor is the answer (the common case).
@@ -296,7 +304,7 @@ impl Map {
     pub fn region(&self) -> (Vec<f64>, Vec<f64>) {
         match self {
             Map::Walls(_) | Map::Empty(_) => (vec![-3.5, -3.5], vec![3.5, 3.5]),
-            Map::Duck(_) => (vec![-2.5, -2.5, 0.3], vec![2.5, 2.5, 2.5]),
+            Map::Duck(_) | Map::Floor => (vec![-2.5, -2.5, 0.3], vec![2.5, 2.5, 2.5]),
         }
     }
 }

@@ -124,7 +124,7 @@ impl View {
 /// The panels of a scene: the map's default extent, grown to hold everything drawn.
 fn views(scene: &Scene) -> Vec<View> {
     let base = match scene.map {
-        Map::Duck(_) => vec![
+        Map::Duck(_) | Map::Floor => vec![
             View { axes: (0, 1), x: (-3.2, 3.2), y: (-3.2, 3.2) },
             View { axes: (0, 2), x: (-3.2, 3.2), y: (-0.2, 3.0) },
         ],
@@ -202,6 +202,12 @@ where
             chart.draw_series(rects).map_err(err)?;
         }
         Map::Empty(_) => {}
+        Map::Floor => {
+            if view.axes.1 == 2 {
+                let floor = Rectangle::new([(view.x.0, view.y.0), (view.x.1, 0.0)], WALL.filled());
+                chart.draw_series(std::iter::once(floor)).map_err(err)?;
+            }
+        }
         Map::Duck(d) => {
             if view.axes.1 == 2 {
                 let floor = Rectangle::new([(view.x.0, view.y.0), (view.x.1, 0.0)], WALL.filled());

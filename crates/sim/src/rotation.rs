@@ -1,7 +1,7 @@
 //! Unit quaternions for 3-D orientations (Drone body, Car caster ball).
 
 /// A unit quaternion `w + xi + yj + zk` rotating body vectors into the world.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Quat {
     /// Scalar part.
     pub w: f64,

@@ -153,3 +153,54 @@ fn duck_world_distance_is_the_nearer_of_floor_and_duck_everywhere() {
         assert_eq!(map.sdf(&p), want, "{p:?}");
     }
 }
+
+#[test]
+fn saved_state_restores_bit_for_bit() {
+    for robot in Robot::ALL {
+        let mut env = make_env(robot, robot.default_map()).unwrap();
+        env.reset(7, None).unwrap();
+        let act = vec![0.3; env.action_space().dim()];
+        for _ in 0..25 {
+            env.step(&act).unwrap();
+        }
+        let saved = env.save_state();
+        let run = |env: &mut Box<dyn Env>| -> Vec<f64> {
+            let mut out = Vec::new();
+            for k in 0..40 {
+                let a: Vec<f64> = (0..act.len()).map(|i| ((k * 7 + i) as f64 * 0.37).sin()).collect();
+                let (obs, s) = env.step(&a).unwrap();
+                out.extend(obs);
+                out.push(s.reward);
+            }
+            out.extend(env.sample_goal());
+            out
+        };
+        let first = run(&mut env);
+        let mut fresh = make_env(robot, robot.default_map()).unwrap();
+        fresh.restore_state(&saved).unwrap();
+        assert_eq!(fresh.steps(), 25, "{robot}");
+        assert_eq!(run(&mut fresh), first, "{robot}: restored run differs");
+    }
+}
+
+#[test]
+fn restoring_another_robots_state_is_an_error_and_changes_nothing() {
+    let point = make_env(Robot::Point, Map::by_name("empty").unwrap()).unwrap();
+    let mut car = make_env(Robot::Car, Map::by_name("empty").unwrap()).unwrap();
+    let before = car.save_state();
+    let err = car.restore_state(&point.save_state()).unwrap_err();
+    assert!(matches!(err, EnvError::BadState { robot: "car", .. }), "{err}");
+    let err = car.restore_state("{not json").unwrap_err();
+    assert!(err.to_string().contains("cannot restore a car"), "{err}");
+    assert_eq!(car.save_state(), before);
+}
+
+#[test]
+fn floor_map_is_open_space_for_the_drone() {
+    let map = Map::by_name("floor").unwrap();
+    assert_eq!(map.dim(), 3);
+    assert_eq!(map.sdf(&[5.0, -3.0, 1.25]), 1.25);
+    let mut env = make_env(Robot::Drone, map).unwrap();
+    env.reset(1, Some(&[0.0, 0.0, 1.0])).unwrap();
+    assert!(make_env(Robot::Point, Map::by_name("floor").unwrap()).is_err());
+}

@@ -65,7 +65,7 @@ const CASTER_DRAG: f64 = CASTER_DAMPING / (CASTER_RADIUS * CASTER_RADIUS);
 const LATERAL_MASS: f64 = 1.0 / (INV_MASS + WHEEL_X * WHEEL_X * INV_INERTIA);
 
 /// The Car's state.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Car {
     /// Position (m).
     pub pos: [f64; 2],

@@ -66,7 +66,7 @@ pub const BASE_GAINS: [f64; 18] = [
 ];
 
 /// The Drone's state.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Drone {
     /// Position (m).
     pub pos: [f64; 3],

@@ -51,7 +51,7 @@ pub fn random_yaw(rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
 
 /// A planar heading kept as a unit vector, turned by small angles without calling
 /// `sin`/`cos` in the physics loop.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Heading {
     c: f64,
     s: f64,

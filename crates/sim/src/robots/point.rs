@@ -47,7 +47,7 @@ const DAMP: f64 = 1.0 / (1.0 + DT * SLIDE_DAMPING / MASS);
 const DV_PER_N: f64 = DT / MASS;
 
 /// The Point robot's state.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Point {
     /// Position (m).
     pub pos: [f64; 2],
