@@ -28,6 +28,9 @@ enum Command {
     /// Spec-constrained planners: train, sample.
     #[command(subcommand)]
     Plan(commands::plan::Command),
+    /// Goal-conditioned PPO controllers: train, eval.
+    #[command(subcommand)]
+    Control(commands::control::Command),
 }
 
 fn main() -> ExitCode {
@@ -36,6 +39,7 @@ fn main() -> ExitCode {
         Command::Robustness(args) => commands::robustness::run(args),
         Command::Sim(cmd) => commands::sim::run(cmd),
         Command::Plan(cmd) => commands::plan::run(cmd),
+        Command::Control(cmd) => commands::control::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

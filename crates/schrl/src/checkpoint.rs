@@ -70,12 +70,15 @@ pub enum CheckpointError {
 const WEIGHTS: &str = "planner.safetensors";
 const META: &str = "planner.json";
 
-fn io(path: &Path, e: impl std::fmt::Display) -> CheckpointError {
+pub(crate) fn io(path: &Path, e: impl std::fmt::Display) -> CheckpointError {
     CheckpointError::Io { path: path.to_path_buf(), message: e.to_string() }
 }
 
 /// Writes `bytes` to `path` through a temporary file and a rename.
-fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<(), String>) -> Result<(), CheckpointError> {
+pub(crate) fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<(), CheckpointError> {
     let tmp = path.with_extension(format!("tmp.{}", std::process::id()));
     if let Err(e) = write(&tmp) {
         let _ = std::fs::remove_file(&tmp);

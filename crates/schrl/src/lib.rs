@@ -5,10 +5,12 @@
 //! * [`planner`] — the GRU-ODE Gaussian planner (Eq. 3).
 //! * [`cpg`] — the constrained policy gradient with a Lagrange multiplier (Eq. 4).
 //! * [`checkpoint`] — saving and loading trained planners.
+//! * [`control`] — the goal-conditioned PPO controller.
 
 #![warn(missing_docs)]
 
 pub mod checkpoint;
+pub mod control;
 pub mod cpg;
 pub mod planner;
 pub mod tasks;

@@ -293,6 +293,105 @@ pub fn image_size(scene: &Scene) -> (u32, u32) {
 /// Draws `scene` to `out` (`.png` or `.svg`); refuses to replace an existing file
 /// unless `overwrite`.
 pub fn save(scene: &Scene, out: &Path, overwrite: bool) -> Result<(), RenderError> {
+    write_picture(out, overwrite, image_size(scene), |root| draw(root, scene), |root| draw(root, scene))
+}
+
+/// One panel of a line chart: series of `(x, y)` points drawn in the palette's
+/// colours (first series orange, then blue, green, grey), y from `y_range` (or the
+/// data's range when `None`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChartPanel {
+    /// The series.
+    pub series: Vec<Vec<(f64, f64)>>,
+    /// Fixed y range, e.g. `(0, 1)` for rates.
+    pub y_range: Option<(f64, f64)>,
+}
+
+const SERIES: [RGBColor; 4] = [EXECUTED, PLANNED, GOAL, WALL];
+
+/// Writes line-chart panels stacked top to bottom (800 × 240 px each) to `out`
+/// (`.png` or `.svg`): training curves. Light grid lines mark round numbers on
+/// both axes; the y = 0 line is darker. Refuses to replace a file unless `overwrite`.
+pub fn save_chart(panels: &[ChartPanel], out: &Path, overwrite: bool) -> Result<(), RenderError> {
+    let size = (800, 240 * panels.len().max(1) as u32);
+    write_picture(out, overwrite, size, |root| draw_chart(root, panels), |root| draw_chart(root, panels))
+}
+
+/// A "nice" grid step (1, 2 or 5 × 10^k) giving about 5–10 lines over `span`.
+fn grid_step(span: f64) -> f64 {
+    let raw = span / 6.0;
+    let mag = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 5.0, 10.0].into_iter().map(|m| m * mag).find(|s| *s >= raw).unwrap_or(10.0 * mag)
+}
+
+fn draw_chart<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, panels: &[ChartPanel]) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(err)?;
+    let areas = root.split_evenly((panels.len().max(1), 1));
+    for (panel, area) in panels.iter().zip(areas) {
+        let pts = || panel.series.iter().flatten().filter(|(x, y)| x.is_finite() && y.is_finite());
+        let (mut x0, mut x1) = pts().fold((f64::MAX, f64::MIN), |(a, b), (x, _)| (a.min(*x), b.max(*x)));
+        let (mut y0, mut y1) = match panel.y_range {
+            Some(r) => r,
+            None => pts().fold((f64::MAX, f64::MIN), |(a, b), (_, y)| (a.min(*y), b.max(*y))),
+        };
+        if x0 > x1 {
+            (x0, x1) = (0.0, 1.0);
+        }
+        if y0 > y1 {
+            (y0, y1) = (0.0, 1.0);
+        }
+        if x1 - x0 < 1e-12 {
+            x1 = x0 + 1.0;
+        }
+        if y1 - y0 < 1e-12 {
+            (y0, y1) = (y0 - 0.5, y1 + 0.5);
+        }
+        let pad = 0.05 * (y1 - y0);
+        let area = area.margin(12, 12, 16, 16);
+        let mut chart =
+            ChartBuilder::on(&area).build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad)).map_err(err)?;
+        let (gx, gy) = (grid_step(x1 - x0), grid_step(y1 - y0));
+        let mut k = (x0 / gx).ceil();
+        while k * gx <= x1 {
+            let line = PathElement::new(vec![(k * gx, y0 - pad), (k * gx, y1 + pad)], GRID);
+            chart.draw_series(std::iter::once(line)).map_err(err)?;
+            k += 1.0;
+        }
+        let mut k = ((y0 - pad) / gy).ceil();
+        while k * gy <= y1 + pad {
+            let colour = if k == 0.0 { WALL } else { GRID };
+            let line = PathElement::new(vec![(x0, k * gy), (x1, k * gy)], colour);
+            chart.draw_series(std::iter::once(line)).map_err(err)?;
+            k += 1.0;
+        }
+        for (i, series) in panel.series.iter().enumerate() {
+            let line: Vec<(f64, f64)> =
+                series.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite()).collect();
+            let style = SERIES[i % SERIES.len()].stroke_width(2);
+            chart.draw_series(std::iter::once(PathElement::new(line, style))).map_err(err)?;
+        }
+        area.draw(&Rectangle::new(
+            [(0, 0), (area.dim_in_pixel().0 as i32 - 1, area.dim_in_pixel().1 as i32 - 1)],
+            WALL,
+        ))
+        .map_err(err)?;
+    }
+    root.present().map_err(err)
+}
+
+/// Writes a picture of `size` pixels to `out` through a temporary file and a rename,
+/// choosing the backend by extension.
+fn write_picture(
+    out: &Path,
+    overwrite: bool,
+    size: (u32, u32),
+    png: impl FnOnce(DrawingArea<BitMapBackend, Shift>) -> Result<(), String>,
+    svg: impl FnOnce(DrawingArea<SVGBackend, Shift>) -> Result<(), String>,
+) -> Result<(), RenderError> {
     let ext = out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     if !matches!(ext.as_deref(), Some("png" | "svg")) {
         return Err(RenderError::Format(out.to_path_buf()));
@@ -301,13 +400,12 @@ pub fn save(scene: &Scene, out: &Path, overwrite: bool) -> Result<(), RenderErro
         return Err(RenderError::Exists(out.to_path_buf()));
     }
     let ext = ext.unwrap();
-    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("scene");
+    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("picture");
     let tmp = out.with_file_name(format!(".{stem}.{}.tmp.{ext}", std::process::id()));
-    let size = image_size(scene);
     let result = if ext == "png" {
-        draw(BitMapBackend::new(&tmp, size).into_drawing_area(), scene)
+        png(BitMapBackend::new(&tmp, size).into_drawing_area())
     } else {
-        draw(SVGBackend::new(&tmp, size).into_drawing_area(), scene)
+        svg(SVGBackend::new(&tmp, size).into_drawing_area())
     };
     let fail = |message: String| RenderError::Write { path: out.to_path_buf(), message };
     if let Err(e) = result {

@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod control;
 pub mod plan;
 pub mod robustness;
 pub mod sim;

@@ -9,7 +9,7 @@
 //!
 //! Control at 50 Hz: the position loop (PID on the error to the current goal, plus
 //! gravity compensation) sets the desired force; its direction, with roll and
-//! pitch limited to 30° and yaw held at 0, sets the desired attitude and its
+//! pitch limited to 30° and yaw held at its current value, sets the desired attitude and its
 //! projection on the body z axis the collective thrust. The attitude loop (PID on
 //! the rotation error `½ vee(R_dᵀR − RᵀR_d)` and the body rates) runs at every
 //! physics step (250 Hz), as flight controllers run attitude faster than position;
@@ -159,13 +159,18 @@ impl Drone {
         }
         let norm = (force[0] * force[0] + force[1] * force[1] + force[2] * force[2]).sqrt();
         let z = force.map(|x| x / norm);
-        // Yaw held at 0: x_c = (1, 0, 0).
-        let y = cross(z, [1.0, 0.0, 0.0]);
+        // Yaw held where it is (x_c = the body x axis flattened): the drone starts at
+        // a random yaw, and a large yaw error couples into roll and pitch through
+        // the attitude error and tilts the drone away from the goal.
+        let r = self.att.matrix();
+        let (cx, cy) = (r[0][0], r[1][0]);
+        let cn = (cx * cx + cy * cy).sqrt().max(1e-9);
+        let y = cross(z, [cx / cn, cy / cn, 0.0]);
         let yn = (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt();
         let y = y.map(|v| v / yn);
         let x = cross(y, z);
         let desired = [[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]];
-        let body_z = apply(&self.att.matrix(), [0.0, 0.0, 1.0]);
+        let body_z = apply(&r, [0.0, 0.0, 1.0]);
         let thrust =
             (force[0] * body_z[0] + force[1] * body_z[1] + force[2] * body_z[2]).clamp(0.0, 4.0 * ROTOR_MAX);
         (desired, thrust)

@@ -1,0 +1,21 @@
+//! The goal-conditioned low-level controller (paper §3.3, App. K): PPO over
+//! vectorised environments of any robot.
+//!
+//! Read top to bottom: [`mlp`] (the networks' kernel), [`policy`] (Gaussian actor
+//! and critic), [`normalize`] (running statistics), [`adam`], [`ppo`] (GAE, the
+//! clipped losses, the update), [`trainer`] (rollouts with random goals, evaluation),
+//! [`checkpoint`] (exact save and resume).
+
+pub mod adam;
+pub mod checkpoint;
+pub mod mlp;
+pub mod normalize;
+pub mod policy;
+pub mod ppo;
+pub mod trainer;
+
+pub use policy::ActorCritic;
+pub use ppo::{PpoConfig, PpoLearner};
+pub use trainer::{
+    ControlConfig, ControlError, ControlMetrics, ControlTrainer, Controller, EvalResult, evaluate,
+};

@@ -1,0 +1,509 @@
+//! Goal-conditioned controller training: PPO over vectorised environments where
+//! every environment chases random goals.
+//!
+//! Each environment starts at a random free position with a random free goal
+//! (uniform in the map's region, clear of obstacles). On reaching the goal it gets a
+//! new one and carries on; a collision (terminal) or the step limit (truncated,
+//! bootstrapped with the critic) resets it. The general controller learns in the
+//! open (`empty` map for ground robots, `floor` for the Drone): it sees only the goal
+//! direction, so obstacles are the planner's business (paper §3.3).
+
+use std::time::Instant;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use sim::{Map, Robot, Step, VecEnv};
+
+use super::normalize::{RewardScaler, RunningMeanStd};
+use super::policy::{ActorCritic, PolicyCache};
+use super::ppo::{PpoConfig, PpoLearner, RolloutBuffer, UpdateStats};
+
+/// What to train.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControlConfig {
+    /// Robot name (`point`, `car`, `drone`).
+    pub robot: String,
+    /// Map name; goals and starts are drawn from its free space.
+    pub map: String,
+    /// Seed of initial weights, environments and action noise.
+    pub seed: u64,
+    /// Environment steps to train for.
+    pub total_steps: usize,
+    /// Step limit of an episode.
+    pub episode_steps: usize,
+    /// PPO hyper-parameters.
+    pub ppo: PpoConfig,
+}
+
+impl ControlConfig {
+    /// Defaults for `robot`: its open map, the reference PPO preset, and a step
+    /// budget that reaches ≥ 95 % success (measured; see the README's results).
+    pub fn for_robot(robot: Robot) -> Self {
+        Self {
+            robot: robot.name().to_string(),
+            map: open_map(robot).name().to_string(),
+            seed: 0,
+            total_steps: default_steps(robot),
+            episode_steps: 1000,
+            ppo: PpoConfig::reference(),
+        }
+    }
+}
+
+/// The open map a general controller trains on: `empty` for ground robots, `floor`
+/// for the Drone.
+pub fn open_map(robot: Robot) -> Map {
+    match robot {
+        Robot::Drone => Map::Floor,
+        _ => Map::by_name("empty").expect("the empty map exists"),
+    }
+}
+
+/// The default training budget for `robot` (environment steps).
+pub fn default_steps(robot: Robot) -> usize {
+    match robot {
+        Robot::Point => 1_000_000,
+        Robot::Car => 2_000_000,
+        Robot::Drone => 400_000,
+    }
+}
+
+/// A training problem, naming what is wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum ControlError {
+    /// A configuration value is invalid.
+    #[error("invalid configuration: {0}")]
+    Config(String),
+    /// The environment refused something.
+    #[error(transparent)]
+    Env(#[from] sim::EnvError),
+}
+
+/// The metrics of one update (one line of `metrics.jsonl`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ControlMetrics {
+    /// Updates done.
+    pub update: usize,
+    /// Environment steps done.
+    pub steps: usize,
+    /// Episodes finished in this rollout.
+    pub episodes: usize,
+    /// Mean undiscounted (unscaled) return of the last 100 episodes.
+    pub mean_return: Option<f64>,
+    /// Goals reached in this rollout.
+    pub goals_reached: usize,
+    /// Over the last 100 settled goals: the fraction reached (a goal is settled when
+    /// reached, or lost when its episode ends by collision or time-out). Optimistic
+    /// next to [`evaluate`], which gives every goal a fresh episode.
+    pub success_rate: Option<f64>,
+    /// Learning rate used.
+    pub lr: f64,
+    /// Loss terms and diagnostics.
+    pub update_stats: UpdateStats,
+    /// Environment steps per second over this rollout and update.
+    pub steps_per_sec: f64,
+    /// Seconds spent stepping environments and acting in this rollout.
+    pub rollout_s: f64,
+    /// Seconds spent in the PPO update.
+    pub update_s: f64,
+}
+
+/// Everything a controller training run holds; [`super::checkpoint`] saves and
+/// restores all of it, so a resumed run continues exactly.
+pub struct ControlTrainer {
+    /// The configuration.
+    pub config: ControlConfig,
+    /// The robot.
+    pub robot: Robot,
+    /// Actor and critic.
+    pub policy: ActorCritic,
+    /// PPO's optimiser side.
+    pub learner: PpoLearner,
+    /// Observation statistics.
+    pub obs_rms: RunningMeanStd,
+    /// Reward scaling.
+    pub reward_scaler: RewardScaler,
+    /// Action noise, shuffling and reset seeds.
+    pub rng: ChaCha8Rng,
+    /// The environments.
+    pub envs: VecEnv,
+    /// Their current raw observations.
+    pub raw_obs: Vec<f64>,
+    /// Their running episode returns.
+    pub episode_returns: Vec<f64>,
+    /// The latest settled goals (reached or not) and finished episodes' returns.
+    pub recent: RecentOutcomes,
+    /// Environment steps done.
+    pub steps: usize,
+    /// Updates done.
+    pub updates: usize,
+    buffer: RolloutBuffer,
+    cache: PolicyCache,
+}
+
+impl ControlTrainer {
+    /// A fresh run.
+    pub fn new(config: ControlConfig) -> Result<Self, ControlError> {
+        config.ppo.validate().map_err(ControlError::Config)?;
+        let robot: Robot = config.robot.parse()?;
+        let map = Map::by_name(&config.map).ok_or_else(|| sim::EnvError::UnknownMap(config.map.clone()))?;
+        if config.episode_steps == 0 {
+            return Err(ControlError::Config("episode_steps must be at least 1".into()));
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+        let env_seed: u64 = rng.random();
+        let mut envs = VecEnv::new(robot, map, config.ppo.num_envs, env_seed)?;
+        for e in envs.envs_mut() {
+            e.set_max_steps(config.episode_steps);
+        }
+        let (od, ad) = (envs.obs_dim(), envs.act_dim());
+        let policy = ActorCritic::new(od, ad, &config.ppo.hidden, &mut rng);
+        let learner = PpoLearner::new(config.ppo.clone(), &policy);
+        let mut raw_obs = vec![0.0; config.ppo.num_envs * od];
+        for (e, o) in envs.envs_mut().iter_mut().zip(raw_obs.chunks_mut(od)) {
+            e.observe(o);
+        }
+        let n = config.ppo.num_envs;
+        Ok(Self {
+            robot,
+            policy,
+            learner,
+            obs_rms: RunningMeanStd::new(od),
+            reward_scaler: RewardScaler::new(n, config.ppo.gamma),
+            rng,
+            envs,
+            raw_obs,
+            episode_returns: vec![0.0; n],
+            recent: RecentOutcomes::default(),
+            steps: 0,
+            updates: 0,
+            buffer: RolloutBuffer::new(n, od, ad),
+            cache: PolicyCache::default(),
+            config,
+        })
+    }
+
+    /// Rebuilds a trainer from saved parts (used by checkpoint loading).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn from_parts(
+        config: ControlConfig,
+        policy: ActorCritic,
+        learner: PpoLearner,
+        obs_rms: RunningMeanStd,
+        reward_scaler: RewardScaler,
+        rng: ChaCha8Rng,
+        envs: VecEnv,
+        raw_obs: Vec<f64>,
+        episode_returns: Vec<f64>,
+        recent: RecentOutcomes,
+        steps: usize,
+        updates: usize,
+    ) -> Result<Self, ControlError> {
+        let robot: Robot = config.robot.parse()?;
+        let n = config.ppo.num_envs;
+        let buffer = RolloutBuffer::new(n, policy.obs_dim(), policy.act_dim());
+        Ok(Self {
+            config,
+            robot,
+            policy,
+            learner,
+            obs_rms,
+            reward_scaler,
+            rng,
+            envs,
+            raw_obs,
+            episode_returns,
+            recent,
+            steps,
+            updates,
+            buffer,
+            cache: PolicyCache::default(),
+        })
+    }
+
+    /// Updates in the whole run.
+    pub fn total_updates(&self) -> usize {
+        self.config.total_steps.div_ceil(self.config.ppo.rollout).max(1)
+    }
+
+    /// `true` once the step budget is spent.
+    pub fn finished(&self) -> bool {
+        self.updates >= self.total_updates()
+    }
+
+    /// The deployable part: policy and observation statistics.
+    pub fn controller(&self) -> Controller {
+        Controller {
+            robot: self.robot,
+            policy: self.policy.clone(),
+            obs_rms: self.obs_rms.clone(),
+            normalize_obs: self.config.ppo.norm_obs,
+        }
+    }
+
+    /// Collects one rollout and runs one PPO update.
+    pub fn train_update(&mut self) -> Result<ControlMetrics, ControlError> {
+        let start = Instant::now();
+        let cfg = self.config.ppo.clone();
+        let (n, od, ad) = (cfg.num_envs, self.policy.obs_dim(), self.policy.act_dim());
+        self.buffer.clear();
+        let mut obs = vec![0.0f32; n * od];
+        let mut actions = vec![0.0f32; n * ad];
+        let mut actions64 = vec![0.0f64; n * ad];
+        let mut log_probs = vec![0.0f32; n];
+        let mut values = vec![0.0f32; n];
+        let mut reports = vec![Step::default(); n];
+        let mut rewards = vec![0.0f64; n];
+        let mut ends = vec![false; n];
+        let mut truncated_obs: Vec<(usize, Vec<f64>)> = Vec::new();
+        let (mut episodes, mut reached) = (0usize, 0usize);
+        for _ in 0..cfg.steps_per_env() {
+            if cfg.norm_obs {
+                self.obs_rms.update(&self.raw_obs);
+            }
+            normalize_obs(cfg.norm_obs, &self.obs_rms, &self.raw_obs, &mut obs);
+            self.policy.act(
+                &obs,
+                n,
+                &mut self.rng,
+                &mut self.cache,
+                &mut actions,
+                &mut log_probs,
+                &mut values,
+            );
+            self.buffer.obs.extend_from_slice(&obs);
+            self.buffer.actions.extend_from_slice(&actions);
+            self.buffer.log_probs.extend_from_slice(&log_probs);
+            self.buffer.values.extend_from_slice(&values);
+            for (d, s) in actions64.iter_mut().zip(&actions) {
+                *d = *s as f64;
+            }
+            self.envs.step_all(&actions64, &mut self.raw_obs, &mut reports)?;
+            truncated_obs.clear();
+            for (i, (env, o)) in self.envs.envs_mut().iter_mut().zip(self.raw_obs.chunks_mut(od)).enumerate()
+            {
+                let s = reports[i];
+                rewards[i] = s.reward;
+                self.episode_returns[i] += s.reward;
+                if s.reached {
+                    reached += 1;
+                    self.recent.push_goal(true);
+                    let goal = env.sample_goal();
+                    env.set_goal(&goal)?;
+                    env.observe(o);
+                }
+                let end = s.collided || s.truncated;
+                ends[i] = end;
+                if end {
+                    if !s.reached {
+                        self.recent.push_goal(false);
+                    }
+                    if s.truncated && !s.collided {
+                        truncated_obs.push((i, o.to_vec()));
+                    }
+                    episodes += 1;
+                    self.recent.push_return(self.episode_returns[i]);
+                    self.episode_returns[i] = 0.0;
+                    let seed: u64 = self.rng.random();
+                    env.reset_into(seed, None, o)?;
+                }
+            }
+            if cfg.norm_reward {
+                self.reward_scaler.scale(&mut rewards, &ends);
+            }
+            let first = self.buffer.rewards.len();
+            self.buffer.rewards.extend(rewards.iter().map(|r| *r as f32));
+            self.buffer.ends.extend_from_slice(&ends);
+            if !truncated_obs.is_empty() {
+                // Bootstrap time-limit cuts: r + γ V(s_final).
+                let raw: Vec<f64> = truncated_obs.iter().flat_map(|(_, o)| o.iter().copied()).collect();
+                let mut x = vec![0.0f32; raw.len()];
+                normalize_obs(cfg.norm_obs, &self.obs_rms, &raw, &mut x);
+                let v = self.policy.value(&x, truncated_obs.len(), &mut self.cache).to_vec();
+                for ((i, _), v) in truncated_obs.iter().zip(v) {
+                    self.buffer.rewards[first + i] += cfg.gamma as f32 * v;
+                }
+            }
+            self.steps += n;
+        }
+        normalize_obs(cfg.norm_obs, &self.obs_rms, &self.raw_obs, &mut obs);
+        self.buffer.last_values = self.policy.value(&obs, n, &mut self.cache).to_vec();
+        let rollout_s = start.elapsed().as_secs_f64();
+
+        let lr = if cfg.anneal_lr {
+            cfg.lr * (1.0 - self.updates as f64 / self.total_updates() as f64)
+        } else {
+            cfg.lr
+        };
+        let t = Instant::now();
+        let stats = self.learner.update(&mut self.policy, &self.buffer, lr, &mut self.rng);
+        let update_s = t.elapsed().as_secs_f64();
+        self.updates += 1;
+        Ok(ControlMetrics {
+            update: self.updates,
+            steps: self.steps,
+            episodes,
+            mean_return: self.recent.mean_return(),
+            goals_reached: reached,
+            success_rate: self.recent.success_rate(),
+            lr,
+            update_stats: stats,
+            steps_per_sec: cfg.rollout as f64 / start.elapsed().as_secs_f64(),
+            rollout_s,
+            update_s,
+        })
+    }
+}
+
+/// Standardises observations with `rms`, or only converts them when normalisation
+/// is off.
+fn normalize_obs(on: bool, rms: &RunningMeanStd, raw: &[f64], out: &mut [f32]) {
+    if on {
+        rms.normalize_into(raw, out);
+    } else {
+        for (o, r) in out.iter_mut().zip(raw) {
+            *o = *r as f32;
+        }
+    }
+}
+
+/// Sliding windows over the latest outcomes (as SB3's 100-episode info buffer).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RecentOutcomes {
+    goals: std::collections::VecDeque<bool>,
+    returns: std::collections::VecDeque<f64>,
+}
+
+impl RecentOutcomes {
+    /// Window length.
+    pub const WINDOW: usize = 100;
+
+    fn push_goal(&mut self, reached: bool) {
+        if self.goals.len() == Self::WINDOW {
+            self.goals.pop_front();
+        }
+        self.goals.push_back(reached);
+    }
+
+    fn push_return(&mut self, r: f64) {
+        if self.returns.len() == Self::WINDOW {
+            self.returns.pop_front();
+        }
+        self.returns.push_back(r);
+    }
+
+    /// Fraction of the window's goals that were reached.
+    pub fn success_rate(&self) -> Option<f64> {
+        (!self.goals.is_empty())
+            .then(|| self.goals.iter().filter(|r| **r).count() as f64 / self.goals.len() as f64)
+    }
+
+    /// Mean of the window's episode returns.
+    pub fn mean_return(&self) -> Option<f64> {
+        (!self.returns.is_empty()).then(|| self.returns.iter().sum::<f64>() / self.returns.len() as f64)
+    }
+}
+
+/// A trained controller ready to drive a robot: the policy (its mean action is
+/// used) and the frozen observation statistics.
+#[derive(Clone, Debug)]
+pub struct Controller {
+    /// The robot it was trained for.
+    pub robot: Robot,
+    /// Actor and critic.
+    pub policy: ActorCritic,
+    /// Observation statistics.
+    pub obs_rms: RunningMeanStd,
+    /// Whether observations are standardised with `obs_rms` (as in training).
+    pub normalize_obs: bool,
+}
+
+impl Controller {
+    /// Mean actions for `n` raw observations (`n × obs_dim`) into `actions`.
+    pub fn act(&self, raw_obs: &[f64], n: usize, cache: &mut PolicyCache, actions: &mut [f64]) {
+        let mut x = vec![0.0f32; raw_obs.len()];
+        normalize_obs(self.normalize_obs, &self.obs_rms, raw_obs, &mut x);
+        let mean = self.policy.mean(&x, n, cache);
+        for (a, m) in actions.iter_mut().zip(mean) {
+            *a = *m as f64;
+        }
+    }
+}
+
+/// Result of [`evaluate`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EvalResult {
+    /// Episodes run.
+    pub episodes: usize,
+    /// Fraction of episodes whose goal was reached (within the step limit, without
+    /// collision).
+    pub success_rate: f64,
+    /// Mean environment steps to reach the goal, over the successful episodes.
+    pub mean_steps_to_reach: Option<f64>,
+    /// Episodes ended by a collision.
+    pub collisions: usize,
+    /// Episodes that ran out of steps.
+    pub timeouts: usize,
+}
+
+/// Runs `episodes` single-goal episodes (random free start and goal on `map`,
+/// mean actions, at most `max_steps` steps each) and reports how many reach the goal.
+pub fn evaluate(
+    controller: &Controller,
+    map: &Map,
+    episodes: usize,
+    seed: u64,
+    max_steps: usize,
+) -> Result<EvalResult, ControlError> {
+    const BATCH: usize = 64;
+    let mut successes = 0usize;
+    let mut steps_sum = 0usize;
+    let mut cache = PolicyCache::default();
+    let mut done = 0usize;
+    let (mut collisions, mut timeouts) = (0, 0);
+    while done < episodes {
+        let n = BATCH.min(episodes - done);
+        let mut envs = VecEnv::new(controller.robot, map.clone(), n, sim::vec_env::member_seed(seed, done))?;
+        let od = envs.obs_dim();
+        let ad = envs.act_dim();
+        let mut obs = vec![0.0; n * od];
+        for (e, o) in envs.envs_mut().iter_mut().zip(obs.chunks_mut(od)) {
+            e.set_max_steps(max_steps);
+            e.observe(o);
+        }
+        let mut active = vec![true; n];
+        let mut actions = vec![0.0; n * ad];
+        let mut t = 0;
+        while active.iter().any(|a| *a) {
+            controller.act(&obs, n, &mut cache, &mut actions);
+            t += 1;
+            for (i, (e, o)) in envs.envs_mut().iter_mut().zip(obs.chunks_mut(od)).enumerate() {
+                if !active[i] {
+                    continue;
+                }
+                let s = e.step_into(&actions[i * ad..(i + 1) * ad], o)?;
+                if s.reached {
+                    successes += 1;
+                    steps_sum += t;
+                    active[i] = false;
+                } else if s.collided {
+                    collisions += 1;
+                    active[i] = false;
+                } else if s.truncated {
+                    timeouts += 1;
+                    active[i] = false;
+                }
+            }
+        }
+        done += n;
+    }
+    Ok(EvalResult {
+        episodes,
+        success_rate: successes as f64 / episodes.max(1) as f64,
+        mean_steps_to_reach: (successes > 0).then(|| steps_sum as f64 / successes as f64),
+        collisions,
+        timeouts,
+    })
+}

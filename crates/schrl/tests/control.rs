@@ -1,0 +1,232 @@
+//! The PPO controller: gradients against candle's autograd, learning on a tiny
+//! budget, determinism, checkpoints and exact resume.
+
+use candle_core::{Device, Tensor, Var};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use schrl::control::checkpoint;
+use schrl::control::policy::{ActorCritic, PolicyCache};
+use schrl::control::ppo::{Minibatch, loss_and_grad};
+use schrl::control::trainer::open_map;
+use schrl::control::{ControlConfig, ControlTrainer, PpoConfig, evaluate};
+use sim::Robot;
+
+/// The same MLP in candle: weights as variables, `tanh` on hidden layers.
+fn candle_mlp(
+    mlp: &schrl::control::mlp::TanhMlp,
+    params: &[f32],
+    x: &Tensor,
+) -> candle_core::Result<(Tensor, Vec<(Var, Var)>)> {
+    let mut h = x.clone();
+    let mut vars = Vec::new();
+    for l in 0..mlp.num_layers() {
+        let (i, o) = (mlp.sizes()[l], mlp.sizes()[l + 1]);
+        let (wr, br) = mlp.layer_ranges(l);
+        let w = Var::from_tensor(&Tensor::from_slice(&params[wr], (o, i), &Device::Cpu)?)?;
+        let b = Var::from_tensor(&Tensor::from_slice(&params[br], o, &Device::Cpu)?)?;
+        h = h.matmul(&w.as_tensor().t()?)?.broadcast_add(b.as_tensor())?;
+        if l + 1 < mlp.num_layers() {
+            h = h.tanh()?;
+        }
+        vars.push((w, b));
+    }
+    Ok((h, vars))
+}
+
+fn random_minibatch(policy: &ActorCritic, n: usize, rng: &mut ChaCha8Rng) -> Minibatch {
+    let (od, ad) = (policy.obs_dim(), policy.act_dim());
+    let mut cache = PolicyCache::default();
+    let obs: Vec<f32> = (0..n * od).map(|_| rng.random_range(-2.0..2.0)).collect();
+    let mut actions = vec![0.0; n * ad];
+    let mut logp = vec![0.0; n];
+    let mut values = vec![0.0; n];
+    policy.act(&obs, n, rng, &mut cache, &mut actions, &mut logp, &mut values);
+    Minibatch {
+        n,
+        // Old log-probabilities off by up to ±0.5 so that some ratios leave the clip range.
+        old_log_probs: logp.iter().map(|l| l + rng.random_range(-0.5..0.5)).collect(),
+        old_values: values.iter().map(|v| v + rng.random_range(-0.6..0.6)).collect(),
+        advantages: (0..n).map(|_| rng.random_range(-2.0..2.0)).collect(),
+        returns: (0..n).map(|_| rng.random_range(-1.0..1.0)).collect(),
+        obs,
+        actions,
+    }
+}
+
+#[test]
+fn ppo_loss_gradient_matches_candle_autograd() -> candle_core::Result<()> {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut policy = ActorCritic::new(5, 2, &[8, 8], &mut rng);
+    // Non-trivial networks: perturb every parameter, and the log-std.
+    for p in policy.params.iter_mut() {
+        *p += rng.random_range(-0.3..0.3);
+    }
+    let cfg = PpoConfig { ent_coef: 0.01, ..PpoConfig::reference() };
+    let mb = random_minibatch(&policy, 32, &mut rng);
+    let mut grads = vec![0.0; policy.params.len()];
+    let parts = loss_and_grad(&policy, &cfg, &mb, &mut PolicyCache::default(), &mut grads);
+    assert!(parts.clip_fraction > 0.05 && parts.clip_fraction < 0.95, "the test must exercise clipping");
+
+    // The same loss, built from candle ops as CleanRL builds it from torch ops.
+    let dev = Device::Cpu;
+    let (n, d) = (mb.n, 2);
+    let (pa, pc, pl) = policy.split(&policy.params);
+    let x = Tensor::from_slice(&mb.obs, (n, 5), &dev)?;
+    let (mean, actor_vars) = candle_mlp(policy.actor(), pa, &x)?;
+    let (value, critic_vars) = candle_mlp(policy.critic(), pc, &x)?;
+    let value = value.squeeze(1)?;
+    let log_std = Var::from_tensor(&Tensor::from_slice(pl, d, &dev)?)?;
+    let act = Tensor::from_slice(&mb.actions, (n, d), &dev)?;
+    let z = act.sub(&mean)?.broadcast_div(&log_std.as_tensor().exp()?)?;
+    let half_ln_2pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
+    let log_prob = ((z.sqr()? * -0.5)?.broadcast_sub(log_std.as_tensor())? - half_ln_2pi)?.sum(1)?;
+    let old = Tensor::from_slice(&mb.old_log_probs, n, &dev)?;
+    let ratio = log_prob.sub(&old)?.exp()?;
+    let adv_raw = Tensor::from_slice(&mb.advantages, n, &dev)?;
+    let m = adv_raw.mean_all()?;
+    let centered = adv_raw.broadcast_sub(&m)?;
+    let std = (centered.sqr()?.sum_all()? / (n as f64 - 1.0))?.sqrt()?;
+    let adv = centered.broadcast_div(&(std + 1e-8)?)?;
+    let pg1 = adv.neg()?.mul(&ratio)?;
+    let pg2 = adv.neg()?.mul(&ratio.clamp(0.8f32, 1.2f32)?)?;
+    let pg_loss = pg1.maximum(&pg2)?.mean_all()?;
+    let ret = Tensor::from_slice(&mb.returns, n, &dev)?;
+    let old_v = Tensor::from_slice(&mb.old_values, n, &dev)?;
+    let v_unclipped = value.sub(&ret)?.sqr()?;
+    let v_clipped = (&old_v + value.sub(&old_v)?.clamp(-0.2f32, 0.2f32)?)?.sub(&ret)?.sqr()?;
+    let v_loss = (v_unclipped.maximum(&v_clipped)?.mean_all()? * 0.5)?;
+    let entropy = (log_std.as_tensor().sum_all()? + d as f64 * (0.5 + half_ln_2pi))?;
+    let loss = ((pg_loss - (entropy * 0.01)?)? + (v_loss * 0.5)?)?;
+    let expected_total = loss.to_scalar::<f32>()?;
+    assert!((expected_total - parts.total).abs() < 1e-4, "loss {expected_total} vs {}", parts.total);
+
+    let g = loss.backward()?;
+    let mut expected = Vec::new();
+    for (w, b) in actor_vars.iter().chain(&critic_vars) {
+        for v in [w, b] {
+            expected.extend(g.get(v.as_tensor()).expect("gradient").flatten_all()?.to_vec1::<f32>()?);
+        }
+    }
+    expected.extend(g.get(log_std.as_tensor()).expect("gradient").to_vec1::<f32>()?);
+    assert_eq!(expected.len(), grads.len());
+    let scale = expected.iter().fold(0.0f32, |a, b| a.max(b.abs()));
+    for (i, (a, b)) in grads.iter().zip(&expected).enumerate() {
+        assert!((a - b).abs() <= 1e-4 * scale.max(1.0), "parameter {i}: hand-written {a}, candle {b}");
+    }
+    Ok(())
+}
+
+fn tiny_config(robot: Robot, seed: u64, steps: usize) -> ControlConfig {
+    let mut c = ControlConfig::for_robot(robot);
+    c.seed = seed;
+    c.total_steps = steps;
+    c.ppo = PpoConfig { rollout: 2000, minibatch: 100, epochs: 4, ..PpoConfig::reference() };
+    c
+}
+
+/// Metrics without the wall-clock fields, for comparisons.
+fn numbers(m: &schrl::control::ControlMetrics) -> String {
+    let mut m = m.clone();
+    m.steps_per_sec = 0.0;
+    m.rollout_s = 0.0;
+    m.update_s = 0.0;
+    serde_json::to_string(&m).unwrap()
+}
+
+#[test]
+fn a_tiny_budget_lowers_the_value_loss_and_beats_the_untrained_policy() {
+    let mut t = ControlTrainer::new(tiny_config(Robot::Point, 3, 80_000)).unwrap();
+    let map = open_map(Robot::Point);
+    let before = evaluate(&t.controller(), &map, 100, 99, 1000).unwrap();
+    let mut value_losses = Vec::new();
+    while !t.finished() {
+        value_losses.push(t.train_update().unwrap().update_stats.loss.value_loss);
+    }
+    let after = evaluate(&t.controller(), &map, 100, 99, 1000).unwrap();
+    let early = value_losses[..3].iter().sum::<f32>();
+    let late = value_losses[value_losses.len() - 3..].iter().sum::<f32>();
+    assert!(late < early, "value loss did not fall: {value_losses:?}");
+    assert!(
+        after.success_rate >= before.success_rate + 0.3,
+        "success {} → {}",
+        before.success_rate,
+        after.success_rate
+    );
+}
+
+#[test]
+fn identical_seeds_give_identical_runs_for_every_robot() {
+    for robot in Robot::ALL {
+        let run = |seed| {
+            let mut t = ControlTrainer::new(tiny_config(robot, seed, 4000)).unwrap();
+            let m: Vec<String> = (0..2).map(|_| numbers(&t.train_update().unwrap())).collect();
+            (m, t.policy.params.clone())
+        };
+        let a = run(5);
+        assert_eq!(a, run(5), "{robot}");
+        assert_ne!(a.1, run(6).1, "{robot}: the seed changes nothing");
+    }
+}
+
+#[test]
+fn resuming_from_a_checkpoint_continues_exactly() {
+    let dir = std::env::temp_dir().join(format!("schrl-control-resume-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let cfg = tiny_config(Robot::Car, 8, 8000);
+    let mut straight = ControlTrainer::new(cfg.clone()).unwrap();
+    let first = numbers(&straight.train_update().unwrap());
+    checkpoint::save(&dir, &straight, false).unwrap();
+    let second = numbers(&straight.train_update().unwrap());
+
+    let mut resumed = checkpoint::load(&dir).unwrap();
+    assert_eq!(resumed.updates, 1);
+    assert_eq!(numbers(&resumed.train_update().unwrap()), second);
+    assert_eq!(resumed.policy.params, straight.policy.params);
+    assert_ne!(first, second);
+
+    // Saving again without permission to overwrite is refused.
+    let err = checkpoint::save(&dir, &resumed, false).unwrap_err();
+    assert!(err.to_string().contains("already holds a checkpoint"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn corrupt_or_mismatched_checkpoints_are_clear_errors() {
+    let base = std::env::temp_dir().join(format!("schrl-control-bad-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let (a, b) = (base.join("a"), base.join("b"));
+    let point = ControlTrainer::new(tiny_config(Robot::Point, 1, 4000)).unwrap();
+    let car = ControlTrainer::new(tiny_config(Robot::Car, 1, 4000)).unwrap();
+    checkpoint::save(&a, &point, false).unwrap();
+    checkpoint::save(&b, &car, false).unwrap();
+
+    // Weights of another run next to this run's metadata.
+    std::fs::copy(b.join("controller.safetensors"), a.join("controller.safetensors")).unwrap();
+    let err = checkpoint::load(&a).err().expect("mixed files must not load").to_string();
+    assert!(err.contains("controller.safetensors"), "{err}");
+
+    // Truncated metadata.
+    let meta = b.join("controller.json");
+    let text = std::fs::read_to_string(&meta).unwrap();
+    std::fs::write(&meta, &text[..text.len() / 2]).unwrap();
+    let err = checkpoint::load(&b).err().expect("truncated metadata must not load").to_string();
+    assert!(err.contains("controller.json"), "{err}");
+
+    let err = checkpoint::load(&base.join("missing")).err().expect("no checkpoint").to_string();
+    assert!(err.contains("missing"), "{err}");
+    std::fs::remove_dir_all(&base).unwrap();
+}
+
+#[test]
+fn bad_configurations_name_the_field() {
+    let mut c = tiny_config(Robot::Point, 0, 1000);
+    c.ppo.rollout = 1001;
+    let err = ControlTrainer::new(c).err().unwrap().to_string();
+    assert!(err.contains("ppo.rollout"), "{err}");
+    let mut c = tiny_config(Robot::Point, 0, 1000);
+    c.ppo.gamma = 1.5;
+    assert!(ControlTrainer::new(c).err().unwrap().to_string().contains("ppo.gamma"));
+    let mut c = tiny_config(Robot::Point, 0, 1000);
+    c.map = "moon".into();
+    assert!(ControlTrainer::new(c).err().unwrap().to_string().contains("moon"));
+}
