@@ -28,6 +28,9 @@ enum Command {
     /// Spec-constrained planners: train, sample.
     #[command(subcommand)]
     Plan(commands::plan::Command),
+    /// Task files: check.
+    #[command(subcommand)]
+    Task(commands::task::Command),
     /// Goal-conditioned PPO controllers: train, eval.
     #[command(subcommand)]
     Control(commands::control::Command),
@@ -40,6 +43,7 @@ fn main() -> ExitCode {
         Command::Sim(cmd) => commands::sim::run(cmd),
         Command::Plan(cmd) => commands::plan::run(cmd),
         Command::Control(cmd) => commands::control::run(cmd),
+        Command::Task(cmd) => commands::task::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

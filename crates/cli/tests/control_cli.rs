@@ -76,3 +76,19 @@ fn bad_arguments_are_clear_errors() {
     let o = schrl(&["control", "eval", "--ckpt", "/nonexistent/run"]);
     assert!(!o.status.success() && stderr(&o).contains("/nonexistent/run"), "{}", stderr(&o));
 }
+
+#[test]
+fn task_check_accepts_shipped_tasks_and_names_the_problem_in_bad_ones() {
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../../tasks");
+    let o = schrl(&["task", "check", &format!("{root}/drone/loop.toml")]);
+    assert!(o.status.success() && stdout(&o).ends_with("ok\n"), "{}", stderr(&o));
+    let dir = std::env::temp_dir().join(format!("schrl-task-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let toml_text = std::fs::read_to_string(format!("{root}/point/seq.toml")).unwrap();
+    std::fs::write(dir.join("seq.toml"), toml_text).unwrap();
+    std::fs::write(dir.join("seq.stl"), "F[1,2] g0 & F[3,4] g9").unwrap();
+    let o = schrl(&["task", "check", dir.join("seq.toml").to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("seq.stl: line 1, column 20: 'g9' is not defined"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,19 +1,28 @@
-//! The paper's five task types for the Point robot (App. G), with the coordinates of
-//! the reference setup: a spec in the STL text syntax, the goal regions its names
-//! refer to, the plan length and the start region.
+//! Tasks as data: a spec file in the STL text syntax plus a small TOML file naming
+//! the robot, the map, the goal regions the spec refers to, the start region, the
+//! plan length and the step limit (paper App. G; coordinates of the reference setup).
 //!
-//! Every spec gets the obstacle clause `G[1,T] safe` where `safe` is the map's
-//! signed distance minus the robot's radius (exact, from the sim crate; a neural
-//! SDF can be bound in its place). The Signal task is on the empty plane, as in the
-//! reference setup (its final goal, the origin, lies inside the walls' cross), so
-//! its `safe` always holds.
+//! The project ships the five task types for Point, Car, Doggo and Drone under
+//! `tasks/<robot>/<task>.{toml,stl}`; they are embedded in the library, so
+//! `Task::builtin("point", TaskKind::Seq)` needs no files. A user adds a task by
+//! writing such a pair and loading it with [`Task::from_file`], which checks
+//! everything and names the file, line and column of any problem.
+//!
+//! Names a spec may use: the goals, `safe` (the map's signed distance minus the
+//! robot's radius: exact, from the sim crate; a neural SDF can be bound in its
+//! place) and, when `counter_from` is set, `counter` (false before that waypoint
+//! index, true from it on). Every shipped spec ends with the obstacle clause
+//! `G[1,T] safe`. The Signal tasks of ground robots are on the empty plane, as in
+//! the reference setup (their final goal, the origin, lies inside the walls' cross).
 
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use candle_core::{DType, Device, Tensor};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
+use serde::Deserialize;
 use sim::Map;
 use stl::tensor::TensorSpec;
 use stl::{AfterStep, Ball, Formula, Predicate, Spec};
@@ -62,7 +71,8 @@ impl std::str::FromStr for TaskKind {
 }
 
 /// A named goal region.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct GoalRegion {
     /// Name used in the spec.
     pub name: String,
@@ -72,13 +82,17 @@ pub struct GoalRegion {
     pub radius: f64,
 }
 
-/// A planning task: spec text, goals, plan length, start region, map.
+/// A task: spec, goals, plan length, start region, map, robot.
 #[derive(Clone, Debug)]
 pub struct Task {
-    /// Which task.
-    pub kind: TaskKind,
+    /// Task name (`seq`, ... or a user's).
+    pub name: String,
+    /// Robot name.
+    pub robot: String,
     /// The spec in the STL text syntax, obstacle clause included.
     pub spec: String,
+    /// The parsed spec.
+    pub formula: Formula,
     /// The goals the spec names.
     pub goals: Vec<GoalRegion>,
     /// Waypoints planned after the start (the path has `steps + 1` states).
@@ -89,111 +103,220 @@ pub struct Task {
     pub map: Map,
     /// Environment step limit when a controller executes the plan.
     pub step_limit: usize,
+    /// Clearance `safe` keeps from obstacles.
+    pub safe_radius: f64,
     /// Waypoint index from which the Signal task's counter holds.
     pub counter_from: Option<usize>,
 }
 
-/// The Point robot's collision radius: the obstacle clause keeps waypoints clear of it.
-pub const POINT_RADIUS: f64 = 0.1;
-
-fn goals(prefix: &str, centers: &[[f64; 2]], radius: f64) -> Vec<GoalRegion> {
-    centers
-        .iter()
-        .enumerate()
-        .map(|(i, c)| GoalRegion { name: format!("{prefix}{i}"), center: c.to_vec(), radius })
-        .collect()
+/// A task file that cannot be used, naming the file and the problem.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{path}: {message}")]
+pub struct TaskError {
+    /// The file.
+    pub path: PathBuf,
+    /// What is wrong (with line and column where known).
+    pub message: String,
 }
 
-/// The loop's clauses over goals `l0..l{n-1}`: be at one of them; never at the same
-/// one twice in a row.
-fn loop_clauses(n: usize) -> (String, String) {
-    let any = (0..n).map(|i| format!("l{i}")).collect::<Vec<_>>().join(" | ");
-    let alt = (0..n).map(|i| format!("(l{i} -> !X l{i})")).collect::<Vec<_>>().join(" & ");
-    (any, alt)
+/// The TOML half of a task.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TaskToml {
+    name: String,
+    robot: String,
+    map: String,
+    spec: String,
+    steps: usize,
+    step_limit: usize,
+    safe_radius: f64,
+    counter_from: Option<usize>,
+    start: StartToml,
+    goal: Vec<GoalRegion>,
 }
 
-/// The loop body of App. G, Eq. 9: `(∨ l_i) ∧ ∧ (l_i ⇒ ¬○ l_i)`.
-fn loop_body(n: usize) -> String {
-    let (any, alt) = loop_clauses(n);
-    format!("({any}) & {alt}")
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StartToml {
+    low: Vec<f64>,
+    high: Vec<f64>,
 }
 
-const DEFAULT_START: ([f64; 2], [f64; 2]) = ([1.0, -2.0], [2.0, -1.0]);
+/// Robots a task may name, with their plan dimension.
+pub const TASK_ROBOTS: [(&str, usize); 4] = [("point", 2), ("car", 2), ("doggo", 2), ("drone", 3)];
+
+/// The shipped task files, embedded: `(robot, task, toml, spec)`.
+const BUILTIN: [(&str, &str, &str, &str); 20] = {
+    macro_rules! t {
+        ($r:literal, $t:literal) => {
+            (
+                $r,
+                $t,
+                include_str!(concat!("../../../tasks/", $r, "/", $t, ".toml")),
+                include_str!(concat!("../../../tasks/", $r, "/", $t, ".stl")),
+            )
+        };
+    }
+    macro_rules! robot {
+        ($r:literal) => {
+            [t!($r, "seq"), t!($r, "cover"), t!($r, "branch"), t!($r, "loop"), t!($r, "signal")]
+        };
+    }
+    let [a, b, c, d, e] = robot!("point");
+    let [f, g, h, i, j] = robot!("car");
+    let [k, l, m, n, o] = robot!("doggo");
+    let [p, q, r, s, u] = robot!("drone");
+    [a, b, c, d, e, f, g, h, i, j, k, l, m, n, o, p, q, r, s, u]
+};
 
 impl Task {
-    /// The Point version of `kind` (reference setup coordinates).
+    /// The shipped task `kind` for `robot` (`point`, `car`, `doggo`, `drone`).
+    pub fn builtin(robot: &str, kind: TaskKind) -> Result<Task, TaskError> {
+        let (_, name, toml_text, spec_text) = BUILTIN
+            .iter()
+            .find(|(r, t, _, _)| *r == robot && *t == kind.name())
+            .ok_or_else(|| TaskError {
+                path: PathBuf::from(format!("tasks/{robot}")),
+                message: format!(
+                    "no built-in tasks for robot '{robot}': expected one of {}",
+                    TASK_ROBOTS.map(|r| r.0).join(", ")
+                ),
+            })?;
+        let toml_path = PathBuf::from(format!("tasks/{robot}/{name}.toml"));
+        Task::from_texts(&toml_path, toml_text, &toml_path.with_extension("stl"), spec_text)
+    }
+
+    /// The Point version of `kind` (the shipped files; they are tested to load).
     pub fn point(kind: TaskKind) -> Task {
-        let corners = [[-2.0, -2.0], [-2.0, 2.0], [2.0, 2.0], [2.0, -2.0]];
-        let start = (DEFAULT_START.0.to_vec(), DEFAULT_START.1.to_vec());
-        let walls = Map::by_name("walls").expect("walls map");
-        let (body, goals, steps, start, map, limit, counter) = match kind {
-            TaskKind::Seq => (
-                "F[1,2] g0 & F[3,4] g1 & F[5,6] g2 & F[7,8] g3".to_string(),
-                goals("g", &[[2.0, 2.0], [-1.0, 2.0], [-2.0, -1.0], [1.0, -2.0]], 0.5),
-                8,
-                start,
-                walls,
-                1000,
-                None,
-            ),
-            TaskKind::Cover => (
-                "F[1,8] g0 & F[1,8] g1 & F[1,8] g2 & F[1,8] g3".to_string(),
-                goals("g", &[[2.0, 2.0], [1.0, -2.0], [-2.0, -1.0], [-1.0, 2.0]], 0.5),
-                8,
-                start,
-                walls,
-                1000,
-                None,
-            ),
-            TaskKind::Branch => {
-                let mut g = goals("a", &[[0.0, 2.0], [2.0, -2.0], [2.0, 0.0]], 0.6);
-                g.extend(goals("b", &[[0.0, -2.0], [-2.0, 2.0], [-2.0, 0.0]], 0.6));
-                (
-                    "(F[1,2] a0 & F[3,4] b0) | (F[1,2] a1 & F[3,4] b1) | (F[1,2] a2 & F[3,4] b2)".to_string(),
-                    g,
-                    4,
-                    (vec![-2.0, -2.0], vec![-1.0, -1.0]),
-                    walls,
-                    800,
-                    None,
-                )
+        Task::builtin("point", kind).expect("shipped Point tasks are valid (tested)")
+    }
+
+    /// Loads and checks a task from its TOML file (the spec file it names is read
+    /// relative to it).
+    pub fn from_file(path: &Path) -> Result<Task, TaskError> {
+        let err = |path: &Path, message: String| TaskError { path: path.to_path_buf(), message };
+        let text = std::fs::read_to_string(path).map_err(|e| err(path, format!("cannot read: {e}")))?;
+        let parsed: TaskToml = toml::from_str(&text).map_err(|e| err(path, toml_message(&e, &text)))?;
+        let spec_path = path.parent().unwrap_or(Path::new(".")).join(&parsed.spec);
+        let spec_text = std::fs::read_to_string(&spec_path)
+            .map_err(|e| err(path, format!("spec file {}: cannot read: {e}", spec_path.display())))?;
+        Task::from_texts(path, &text, &spec_path, &spec_text)
+    }
+
+    /// Builds and checks a task from the texts of its two files (paths for messages).
+    pub fn from_texts(
+        toml_path: &Path,
+        toml_text: &str,
+        spec_path: &Path,
+        spec_text: &str,
+    ) -> Result<Task, TaskError> {
+        let bad = |message: String| TaskError { path: toml_path.to_path_buf(), message };
+        let t: TaskToml = toml::from_str(toml_text).map_err(|e| bad(toml_message(&e, toml_text)))?;
+        let dim = TASK_ROBOTS.iter().find(|(r, _)| *r == t.robot).map(|(_, d)| *d).ok_or_else(|| {
+            bad(format!(
+                "robot: unknown robot '{}': expected one of {}",
+                t.robot,
+                TASK_ROBOTS.map(|r| r.0).join(", ")
+            ))
+        })?;
+        let map = Map::by_name(&t.map).ok_or_else(|| {
+            bad(format!("map: unknown map '{}': expected one of {}", t.map, sim::map::MAP_NAMES.join(", ")))
+        })?;
+        if map.dim() != dim {
+            return Err(bad(format!(
+                "map: the {} plans in {dim}-D but the {} map is {}-D",
+                t.robot,
+                t.map,
+                map.dim()
+            )));
+        }
+        if t.steps == 0 {
+            return Err(bad("steps: must be at least 1".into()));
+        }
+        if t.step_limit == 0 {
+            return Err(bad("step_limit: must be at least 1".into()));
+        }
+        if !(t.safe_radius >= 0.0 && t.safe_radius.is_finite()) {
+            return Err(bad(format!("safe_radius: {} is not a non-negative number", t.safe_radius)));
+        }
+        if t.start.low.len() != dim || t.start.high.len() != dim {
+            return Err(bad(format!("start: low and high need {dim} numbers each")));
+        }
+        if t.start.low.iter().zip(&t.start.high).any(|(l, h)| !(l <= h && l.is_finite() && h.is_finite())) {
+            return Err(bad("start: every low must be finite and at most its high".into()));
+        }
+        if t.goal.is_empty() {
+            return Err(bad("goal: at least one [[goal]] is needed".into()));
+        }
+        for (i, g) in t.goal.iter().enumerate() {
+            let at = format!("goal[{i}] ('{}')", g.name);
+            if !stl::is_valid_name(&g.name) || ["safe", "counter"].contains(&g.name.as_str()) {
+                return Err(bad(format!(
+                    "{at}: not a usable predicate name (letters, digits, _; not safe/counter)"
+                )));
             }
-            TaskKind::Loop => {
-                // Alternation reads the next waypoint, so it stops one step before the
-                // path's end; written over [1,17] it would ask the last waypoint to be
-                // at a corner and not at it (X at the end reads the end itself).
-                let (any, alt) = loop_clauses(4);
-                (
-                    format!("G[1,17] ({any}) & G[1,16] ({alt})"),
-                    goals("l", &corners, 0.6),
-                    17,
-                    start,
-                    walls,
-                    2000,
-                    None,
-                )
+            if t.goal[..i].iter().any(|o| o.name == g.name) {
+                return Err(bad(format!("{at}: the name is used twice")));
             }
-            TaskKind::Signal => {
-                let mut g = goals("l", &corners, 0.8);
-                g.push(GoalRegion { name: "final".into(), center: vec![0.0, 0.0], radius: 0.8 });
-                (
-                    format!("F[1,12] final & ({}) U[1,12] counter", loop_body(4)),
-                    g,
-                    12,
-                    start,
-                    Map::by_name("empty").expect("empty map"),
-                    2000,
-                    Some(10),
-                )
+            if g.center.len() != dim || g.center.iter().any(|c| !c.is_finite()) {
+                return Err(bad(format!("{at}: center needs {dim} finite numbers")));
             }
-        };
-        let spec = format!("({body}) & G[1,{steps}] safe");
-        Task { kind, spec, goals, steps, start, map, step_limit: limit, counter_from: counter }
+            if !(g.radius > 0.0 && g.radius.is_finite()) {
+                return Err(bad(format!("{at}: radius must be positive")));
+            }
+        }
+        if let Some(c) = t.counter_from
+            && c > t.steps
+        {
+            return Err(bad(format!("counter_from: {c} is after the last waypoint ({})", t.steps)));
+        }
+        let spec_err = |message: String| TaskError { path: spec_path.to_path_buf(), message };
+        let formula = stl::parse(spec_text).map_err(|e| spec_err(e.render(spec_text)))?;
+        for name in formula.names() {
+            let known = t.goal.iter().any(|g| g.name == name)
+                || name == "safe"
+                || (name == "counter" && t.counter_from.is_some());
+            if !known {
+                let at = stl::locate_name(spec_text, name)
+                    .map_or(String::new(), |(l, c)| format!("line {l}, column {c}: "));
+                return Err(spec_err(format!(
+                    "{at}'{name}' is not defined: the task's names are its goals ({}), safe{}",
+                    t.goal.iter().map(|g| g.name.as_str()).collect::<Vec<_>>().join(", "),
+                    if t.counter_from.is_some() { ", counter" } else { " (and counter, with counter_from)" }
+                )));
+            }
+        }
+        match formula.horizon() {
+            Some(h) if h <= t.steps => {}
+            Some(h) => {
+                return Err(spec_err(format!(
+                    "the spec looks at waypoint {h}, but the plan has {} waypoints (steps in {})",
+                    t.steps,
+                    toml_path.display()
+                )));
+            }
+            None => {
+                return Err(spec_err("the spec has an unbounded temporal operator; plans are finite".into()));
+            }
+        }
+        Ok(Task {
+            name: t.name,
+            robot: t.robot,
+            spec: spec_text.to_string(),
+            formula,
+            goals: t.goal,
+            steps: t.steps,
+            start: (t.start.low, t.start.high),
+            map,
+            step_limit: t.step_limit,
+            safe_radius: t.safe_radius,
+            counter_from: t.counter_from,
+        })
     }
 
     /// The parsed formula.
     pub fn formula(&self) -> Formula {
-        stl::parse(&self.spec).expect("built-in task specs parse")
+        self.formula.clone()
     }
 
     /// The scalar predicates by name: goals, `safe`, and the Signal counter.
@@ -203,7 +326,7 @@ impl Task {
             .iter()
             .map(|g| (g.name.clone(), Arc::new(Ball::new(g.center.clone(), g.radius)) as Arc<dyn Predicate>))
             .collect();
-        out.push(("safe".into(), Arc::new(MapClearance::new(self.map.clone(), POINT_RADIUS))));
+        out.push(("safe".into(), Arc::new(MapClearance::new(self.map.clone(), self.safe_radius))));
         if let Some(step) = self.counter_from {
             out.push(("counter".into(), Arc::new(AfterStep { step })));
         }
@@ -232,7 +355,7 @@ impl Task {
             .into_iter()
             .fold(Spec::builder(self.formula()).state_dim(dim), |b, (n, p)| b.bind_shared(n, p))
             .build()
-            .expect("built-in task specs bind")
+            .expect("task names are checked when the task is loaded")
     }
 
     /// The spec for batches of paths as tensors (differentiable in candle).
@@ -242,7 +365,7 @@ impl Task {
             .into_iter()
             .fold(TensorSpec::builder(self.formula(), dim), |b, (n, p)| b.bind_shared_predicate(n, p))
             .build()
-            .expect("built-in task specs bind")
+            .expect("task names are checked when the task is loaded")
     }
 }
 
@@ -293,4 +416,17 @@ pub fn hard_robustness(spec: &Spec, paths: &Tensor) -> candle_core::Result<Vec<f
     let steps = paths.dim(1)?;
     let flat: Vec<f64> = paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
     spec.robustness_batch(&flat, steps, &stl::Semantics::hard()).map_err(candle_core::Error::msg)
+}
+
+/// A TOML error with its line and column.
+fn toml_message(e: &toml::de::Error, text: &str) -> String {
+    match e.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            format!("line {line}, column {column}: {}", e.message())
+        }
+        None => e.message().to_string(),
+    }
 }

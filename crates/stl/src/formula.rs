@@ -261,7 +261,11 @@ impl Formula {
             Formula::And(v) | Formula::Or(v) => v.iter().try_fold(0, |m, f| sub(f).map(|h| m.max(h))),
             Formula::Implies(l, r) => Some(sub(l)?.max(sub(r)?)),
             Formula::Eventually(i, f) | Formula::Globally(i, f) => Some(i.end? + sub(f)?),
-            Formula::Until(i, l, r) => Some(i.end? + sub(l)?.max(sub(r)?)),
+            // ψ is read at k ≤ b, φ only on [a, k − 1] (App. C), so at most at b − 1.
+            Formula::Until(i, l, r) => {
+                let (b, hl, hr) = (i.end?, sub(l)?, sub(r)?);
+                Some((b + hr).max(if b > i.start { b - 1 + hl } else { 0 }))
+            }
         }
     }
 }

@@ -107,3 +107,15 @@ fn builder_matches_the_issue_example() {
     assert_eq!(f.horizon(), Some(8));
     assert_eq!(f.names(), vec!["goal", "safe"]);
 }
+
+/// Regression: `until` reads its left operand only before the step where the right
+/// one holds (App. C), so `(X a) U[1,3] b` looks 3 steps ahead, not 4; the Signal
+/// task's spec spans exactly its 12 waypoints.
+#[test]
+fn until_horizon_counts_the_left_operand_one_step_short() {
+    assert_eq!(parse("(X a) U[1,3] b").unwrap().horizon(), Some(3));
+    assert_eq!(parse("(X X a) U[1,3] b").unwrap().horizon(), Some(4));
+    assert_eq!(parse("a U[1,3] (X b)").unwrap().horizon(), Some(4));
+    assert_eq!(parse("(X a) U[2,2] b").unwrap().horizon(), Some(2));
+    assert_eq!(parse("a U[1,3] b").unwrap().horizon(), Some(3));
+}

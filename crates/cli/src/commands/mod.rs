@@ -5,3 +5,4 @@ pub mod plan;
 pub mod robustness;
 pub mod sim;
 pub mod spec_text;
+pub mod task;

@@ -1,0 +1,107 @@
+//! Task files: every shipped task loads; malformed files are clear errors naming the
+//! file and the problem.
+
+use std::path::{Path, PathBuf};
+
+use schrl::tasks::{TASK_ROBOTS, Task, TaskKind};
+
+fn repo_tasks() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tasks")
+}
+
+#[test]
+fn every_shipped_task_loads_from_its_files_and_matches_the_embedded_copy() {
+    for (robot, dim) in TASK_ROBOTS {
+        for kind in TaskKind::ALL {
+            let file = Task::from_file(&repo_tasks().join(robot).join(format!("{}.toml", kind.name())))
+                .unwrap_or_else(|e| panic!("{e}"));
+            let builtin = Task::builtin(robot, kind).unwrap();
+            assert_eq!(file.formula, builtin.formula, "{robot} {}", kind.name());
+            assert_eq!(file.goals, builtin.goals);
+            assert_eq!(file.map.dim(), dim);
+            assert_eq!(
+                file.formula.horizon(),
+                Some(file.steps),
+                "{robot} {}: spec should span the plan",
+                kind.name()
+            );
+            // Every spec carries the obstacle clause.
+            assert!(file.formula.names().contains(&"safe"), "{robot} {}", kind.name());
+        }
+    }
+}
+
+#[test]
+fn point_seq_is_the_papers_sequence() {
+    let t = Task::point(TaskKind::Seq);
+    let expected = stl::parse("(F[1,2] g0 & F[3,4] g1 & F[5,6] g2 & F[7,8] g3) & G[1,8] safe").unwrap();
+    assert_eq!(t.formula, expected);
+    assert_eq!(t.goals[1].center, vec![-1.0, 2.0]);
+    assert_eq!((t.steps, t.step_limit, t.map.name()), (8, 1000, "walls"));
+}
+
+/// Writes a task pair into a fresh directory and loads it.
+fn load(toml_text: &str, spec_text: &str) -> Result<Task, schrl::tasks::TaskError> {
+    let dir = std::env::temp_dir().join(format!(
+        "schrl-task-{}-{}",
+        std::process::id(),
+        toml_text.len() * 31 + spec_text.len()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("t.toml"), toml_text).unwrap();
+    std::fs::write(dir.join("t.stl"), spec_text).unwrap();
+    Task::from_file(&dir.join("t.toml"))
+}
+
+const GOOD: &str = r#"
+name = "mine"
+robot = "point"
+map = "walls"
+spec = "t.stl"
+steps = 2
+step_limit = 500
+safe_radius = 0.1
+
+[start]
+low = [1.0, -2.0]
+high = [2.0, -1.0]
+
+[[goal]]
+name = "home"
+center = [2.0, 2.0]
+radius = 0.5
+"#;
+
+#[test]
+fn a_users_task_loads() {
+    let t = load(GOOD, "F[1,2] home & G[1,2] safe").unwrap();
+    assert_eq!((t.name.as_str(), t.steps), ("mine", 2));
+}
+
+#[test]
+fn malformed_tasks_name_the_file_and_the_problem() {
+    let cases: Vec<(String, &str, &str)> = vec![
+        (GOOD.replace("steps = 2", "steps = 2\nspeed = 3"), "F[1,2] home", "unknown field `speed`"),
+        (GOOD.replace("robot = \"point\"", "robot = \"tank\""), "F[1,2] home", "unknown robot 'tank'"),
+        (GOOD.replace("map = \"walls\"", "map = \"duck\""), "F[1,2] home", "2-D but the duck map is 3-D"),
+        (
+            GOOD.replace("center = [2.0, 2.0]", "center = [2.0]"),
+            "F[1,2] home",
+            "goal[0] ('home'): center needs 2",
+        ),
+        (GOOD.replace("radius = 0.5", "radius = -1"), "F[1,2] home", "radius must be positive"),
+        (GOOD.replace("steps = 2", "steps = \"two\""), "F[1,2] home", "line 6, column 9"),
+        (GOOD.to_string(), "F[1,2] home &\n  G[1,2] saef", "line 2, column 10: 'saef' is not defined"),
+        (GOOD.to_string(), "F[1,2] home & (", "t.stl"),
+        (GOOD.to_string(), "F[1,5] home", "looks at waypoint 5, but the plan has 2"),
+        (GOOD.to_string(), "F home", "unbounded"),
+        (GOOD.replace("name = \"home\"", "name = \"safe\""), "F[1,2] safe", "not a usable predicate name"),
+    ];
+    for (toml_text, spec, expected) in cases {
+        let err = load(&toml_text, spec).err().unwrap_or_else(|| panic!("accepted: {spec}")).to_string();
+        assert!(err.contains(expected), "expected '{expected}' in: {err}");
+        assert!(err.contains("t.toml") || err.contains("t.stl"), "no file named in: {err}");
+    }
+    let err = Task::from_file(Path::new("/nonexistent/task.toml")).unwrap_err().to_string();
+    assert!(err.contains("/nonexistent/task.toml") && err.contains("cannot read"), "{err}");
+}
