@@ -28,6 +28,10 @@ enum Command {
     /// Spec-constrained planners: train, sample.
     #[command(subcommand)]
     Plan(commands::plan::Command),
+    /// Train planner and controller together on a task (Algorithm 1), then evaluate.
+    Train(commands::train::TrainArgs),
+    /// Evaluate a trained task: satisfaction and steps to reach over 5 groups of 100 runs.
+    Eval(commands::train::EvalArgs),
     /// Task files: check.
     #[command(subcommand)]
     Task(commands::task::Command),
@@ -44,6 +48,8 @@ fn main() -> ExitCode {
         Command::Plan(cmd) => commands::plan::run(cmd),
         Command::Control(cmd) => commands::control::run(cmd),
         Command::Task(cmd) => commands::task::run(cmd),
+        Command::Train(args) => commands::train::train(args),
+        Command::Eval(args) => commands::train::eval(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

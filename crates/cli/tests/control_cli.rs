@@ -92,3 +92,81 @@ fn task_check_accepts_shipped_tasks_and_names_the_problem_in_bad_ones() {
     assert!(stderr(&o).contains("seq.stl: line 1, column 20: 'g9' is not defined"), "{}", stderr(&o));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn joint_train_resume_and_eval_end_to_end() {
+    let dir = std::env::temp_dir().join(format!("schrl-joint-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let ctl = dir.join("ctl");
+    let o = schrl(&[
+        "control",
+        "train",
+        "--robot",
+        "point",
+        "--steps",
+        "4000",
+        "--out",
+        ctl.to_str().unwrap(),
+        "--eval-episodes",
+        "0",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let run = dir.join("run");
+    let run_s = run.to_str().unwrap();
+    let args =
+        ["train", "--task", "branch", "--steps", "15000", "--pretrain-updates", "5", "--eval-groups", "1"];
+    let o = schrl(&[&args[..], &["--controller", ctl.to_str().unwrap(), "--out", run_s]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("satisfaction: ") && stdout(&o).contains("steps to reach: "),
+        "{}",
+        stdout(&o)
+    );
+    for f in [
+        "joint.json",
+        "planner.safetensors",
+        "controller/controller.json",
+        "metrics.jsonl",
+        "training_curve.png",
+        "episodes.png",
+    ] {
+        assert!(run.join(f).exists(), "{f} missing");
+    }
+    let o = schrl(&[&args[..], &["--controller", ctl.to_str().unwrap(), "--out", run_s]].concat());
+    assert!(!o.status.success() && stderr(&o).contains("--force"), "{}", stderr(&o));
+    let lines = |p: &std::path::Path| std::fs::read_to_string(p).unwrap().lines().count();
+    let before = lines(&run.join("metrics.jsonl"));
+    let o = schrl(&[
+        "train",
+        "--task",
+        "branch",
+        "--resume",
+        "--steps",
+        "30000",
+        "--eval-groups",
+        "0",
+        "--out",
+        run_s,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(lines(&run.join("metrics.jsonl")) > before);
+    let o = schrl(&["eval", "--ckpt", run_s, "--groups", "2", "--per-group", "10"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    let line = text.lines().find(|l| l.starts_with("satisfaction: ")).unwrap();
+    let (mean, std) = line["satisfaction: ".len()..].split_once(" ± ").unwrap();
+    assert!((0.0..=1.0).contains(&mean.parse::<f64>().unwrap()) && std.parse::<f64>().unwrap() >= 0.0);
+    let o = schrl(&[
+        "train",
+        "--robot",
+        "car",
+        "--task",
+        "seq",
+        "--controller",
+        ctl.to_str().unwrap(),
+        "--out",
+        dir.join("x").to_str().unwrap(),
+    ]);
+    assert!(stderr(&o).contains("a point controller, not car"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -24,7 +24,7 @@ use rand_chacha::ChaCha8Rng;
 use stl::Semantics;
 use stl::tensor::TensorSpec;
 
-use crate::planner::{GruOdePlanner, PlannerConfig};
+use crate::planner::{GruOdePlanner, PlanBatch, PlannerConfig};
 use crate::tasks::{self, Task};
 
 /// The dual variable of the spec constraint `ρ ≥ ε`.
@@ -242,18 +242,34 @@ impl PlanTrainer {
         tasks::hard_robustness(&self.hard, paths)
     }
 
-    /// One update on a fresh batch of sampled paths.
+    /// One update on a fresh batch of sampled paths, with `r_l` from the configured
+    /// [`ControlReward`].
     pub fn update(&mut self) -> Result<UpdateStats> {
-        let (b, steps, dim) = (self.cfg.batch, self.task.steps, self.task.map.dim());
-        let g0 = self.task.sample_starts(&mut self.rng, b)?;
-        let noise = self.task.sample_noise(&mut self.rng, b)?;
-        let batch = self.planner.sample(&g0, &noise)?;
+        let batch = self.sample(self.cfg.batch)?;
+        let flat: Vec<f64> = batch.paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
+        let rl = self.control.reward(&flat, self.task.steps, self.task.map.dim());
+        self.update_on(&batch, &rl)
+    }
+
+    /// Samples `n` paths from starts in the task's start region (training noise).
+    pub fn sample(&mut self, n: usize) -> Result<PlanBatch> {
+        let g0 = self.task.sample_starts(&mut self.rng, n)?;
+        let noise = self.task.sample_noise(&mut self.rng, n)?;
+        self.planner.sample(&g0, &noise)
+    }
+
+    /// One update on paths sampled by [`PlanTrainer::sample`] with their low-level
+    /// rewards `r_l` (one per path): `r_h = ρ + r_l` drives the clipped policy
+    /// gradient, and for CPG `λ·ρ` the constraint (Eq. 4).
+    pub fn update_on(&mut self, batch: &PlanBatch, rl: &[f64]) -> Result<UpdateStats> {
+        let b = batch.paths.dim(0)?;
+        if rl.len() != b {
+            candle_core::bail!("{} low-level rewards for {b} paths", rl.len());
+        }
         let rho = self.spec.robustness(&batch.paths, &self.cfg.semantics)?;
         let rho_v: Vec<f64> = rho.to_dtype(DType::F64)?.to_vec1()?;
-        let flat: Vec<f64> = batch.paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
-        let rl = self.control.reward(&flat, steps, dim);
         // Advantages: r_h = ρ + r_l against the batch mean, normalised.
-        let rh: Vec<f64> = rho_v.iter().zip(&rl).map(|(a, b)| a + b).collect();
+        let rh: Vec<f64> = rho_v.iter().zip(rl).map(|(a, b)| a + b).collect();
         let mean = rh.iter().sum::<f64>() / b as f64;
         let std = (rh.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / b as f64).sqrt() + 1e-8;
         let adv: Vec<f32> = rh.iter().map(|x| ((x - mean) / std) as f32).collect();
@@ -284,6 +300,16 @@ impl PlanTrainer {
             lambda: self.lagrangian.lambda,
             loss: loss.to_dtype(DType::F64)?.to_scalar()?,
         })
+    }
+
+    /// Loads planner weights saved from a trainer of the same shape.
+    pub fn load_weights(&mut self, path: &std::path::Path) -> Result<()> {
+        self.varmap.load(path)
+    }
+
+    /// Sets the dual variable (restoring a checkpoint).
+    pub fn set_lambda(&mut self, lambda: f64) {
+        self.lagrangian.lambda = lambda;
     }
 
     /// Fraction of `n` freshly sampled paths that satisfy the spec (hard ρ > 0).

@@ -6,11 +6,15 @@
 //! * [`cpg`] — the constrained policy gradient with a Lagrange multiplier (Eq. 4).
 //! * [`checkpoint`] — saving and loading trained planners.
 //! * [`control`] — the goal-conditioned PPO controller.
+//! * [`execute`] — driving the robot through a plan's waypoints; satisfaction of what it did.
+//! * [`joint`] — joint training of planner and controller (Algorithm 1), task evaluation.
 
 #![warn(missing_docs)]
 
 pub mod checkpoint;
 pub mod control;
 pub mod cpg;
+pub mod execute;
+pub mod joint;
 pub mod planner;
 pub mod tasks;

@@ -107,6 +107,8 @@ pub struct Task {
     pub safe_radius: f64,
     /// Waypoint index from which the Signal task's counter holds.
     pub counter_from: Option<usize>,
+    /// The TOML text it was loaded from (kept so runs can store their task).
+    pub toml: String,
 }
 
 /// A task file that cannot be used, naming the file and the problem.
@@ -311,6 +313,7 @@ impl Task {
             step_limit: t.step_limit,
             safe_radius: t.safe_radius,
             counter_from: t.counter_from,
+            toml: toml_text.to_string(),
         })
     }
 

@@ -140,7 +140,8 @@ fn train(args: TrainArgs) -> Result<()> {
     };
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let metrics_path = args.out.join("metrics.jsonl");
-    let mut history = if args.resume { read_metrics(&metrics_path)? } else { Vec::new() };
+    let mut history: Vec<ControlMetrics> =
+        if args.resume { super::read_jsonl(&metrics_path)? } else { Vec::new() };
     // Keep only the lines the checkpoint covers, so a resumed log has no duplicates.
     history.retain(|m| m.update <= trainer.updates);
     let mut log = std::fs::File::create(&metrics_path)
@@ -188,18 +189,6 @@ fn train(args: TrainArgs) -> Result<()> {
         print_eval(&r);
     }
     Ok(())
-}
-
-fn read_metrics(path: &Path) -> Result<Vec<ControlMetrics>> {
-    let Ok(text) = std::fs::read_to_string(path) else { return Ok(Vec::new()) };
-    text.lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(i, l)| {
-            serde_json::from_str(l)
-                .with_context(|| format!("{}:{}: not a metrics line", path.display(), i + 1))
-        })
-        .collect()
 }
 
 /// Success rate (top, 0–1) and mean episode return (bottom) against steps.

@@ -1,0 +1,328 @@
+//! `schrl train` and `schrl eval`: joint hierarchical training of a task, and its
+//! evaluation on what the robot actually does.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use schrl::control::{ControlConfig, ControlTrainer, checkpoint as control_ckpt};
+use schrl::cpg::{CpgConfig, Method};
+use schrl::joint::{JointConfig, JointMetrics, JointTrainer, TaskEval, evaluate_task, mean_std, run_dir};
+use schrl::tasks::{Task, TaskKind};
+use sim::Robot;
+use sim::render::{ChartPanel, Goal, PathKind, Polyline, Scene};
+use stl::Semantics;
+
+/// Arguments of `schrl train`.
+#[derive(clap::Args, Debug)]
+pub struct TrainArgs {
+    /// Robot: point, car or drone.
+    #[arg(long, default_value = "point")]
+    robot: Robot,
+    /// Task: seq, cover, branch, loop, signal, or a task file (TOML).
+    #[arg(long)]
+    task: String,
+    /// Seed of everything.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Environment steps of joint training (default: 3 M).
+    #[arg(long, default_value_t = 3_000_000)]
+    steps: usize,
+    /// Stop early once this fraction of the last 20 iterations' runs satisfy the task.
+    #[arg(long, default_value_t = 0.97)]
+    target: f64,
+    /// Warm-start the controller from this `schrl control train` run (default: train
+    /// a general controller first, into DIR/general).
+    #[arg(long)]
+    controller: Option<PathBuf>,
+    /// Semantics of the spec in the planner's loss.
+    #[arg(long, default_value = "soft:2")]
+    semantics: Semantics,
+    /// Paths planned and executed per iteration.
+    #[arg(long, default_value_t = 8)]
+    plan_batch: usize,
+    /// Weight of the planner's policy-gradient term (reference: 0.1).
+    #[arg(long, default_value_t = 0.1)]
+    pg_weight: f64,
+    /// Dual step size of λ.
+    #[arg(long, default_value_t = 0.05)]
+    lambda_lr: f64,
+    /// Planner-only updates (batch 64, no execution) before joint training, stopping
+    /// once 95 % of a batch satisfies the spec; λ then restarts from 1.
+    #[arg(long, default_value_t = 1000)]
+    pretrain_updates: usize,
+    /// Keep the planner fixed (ablation).
+    #[arg(long)]
+    freeze_planner: bool,
+    /// Keep the controller fixed (ablation).
+    #[arg(long)]
+    freeze_controller: bool,
+    /// Run directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Replace an existing run.
+    #[arg(long)]
+    force: bool,
+    /// Continue the run in --out (to --steps).
+    #[arg(long, conflicts_with = "force")]
+    resume: bool,
+    /// Evaluation groups of 100 runs after training (0: none).
+    #[arg(long, default_value_t = 5)]
+    eval_groups: usize,
+}
+
+/// Arguments of `schrl eval`.
+#[derive(clap::Args, Debug)]
+pub struct EvalArgs {
+    /// Run directory of `schrl train`.
+    #[arg(long)]
+    ckpt: PathBuf,
+    /// Groups of runs.
+    #[arg(long, default_value_t = 5)]
+    groups: usize,
+    /// Runs per group.
+    #[arg(long, default_value_t = 100)]
+    per_group: usize,
+    /// Seed of starts and plans.
+    #[arg(long, default_value_t = 2024)]
+    seed: u64,
+    /// Picture of executed runs with their planned waypoints (PNG or SVG).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Replace the picture.
+    #[arg(long)]
+    force: bool,
+}
+
+fn load_task(robot: Robot, task: &str) -> Result<Task> {
+    let t = if task.ends_with(".toml") {
+        Task::from_file(Path::new(task))?
+    } else {
+        let kind: TaskKind = task.parse().map_err(anyhow::Error::msg)?;
+        Task::builtin(robot.name(), kind)?
+    };
+    if t.robot != robot.name() {
+        bail!("task '{}' is for the {}, not the {robot}", t.name, t.robot);
+    }
+    Ok(t)
+}
+
+fn bar(len: u64, what: &str) -> Result<ProgressBar> {
+    let b = ProgressBar::new(len);
+    b.set_style(ProgressStyle::with_template(&format!(
+        "{what:>10} {{bar:40}} {{percent}}% {{elapsed_precise}} {{msg}}"
+    ))?);
+    Ok(b)
+}
+
+/// Trains a general controller for `robot` into `dir` with a progress bar.
+fn general_controller(robot: Robot, seed: u64, dir: &Path) -> Result<ControlTrainer> {
+    let mut cfg = ControlConfig::for_robot(robot);
+    cfg.seed = seed;
+    let mut t = ControlTrainer::new(cfg)?;
+    let b = bar(t.total_updates() as u64, "controller")?;
+    while !t.finished() {
+        let m = t.train_update()?;
+        b.set_position(m.update as u64);
+        b.set_message(format!("success {}", m.success_rate.map_or("-".into(), |s| format!("{s:.2}"))));
+    }
+    b.finish_and_clear();
+    control_ckpt::save(dir, &t, true)?;
+    Ok(t)
+}
+
+/// Trains the planner alone on the spec (r_l = 0) until 95 % of a batch of 64
+/// satisfies it, then restarts λ at its initial value: the joint phase starts from
+/// plans that meet the spec, with the constraint slack, so the controller's return
+/// steers the planner instead of a λ inflated by the first random plans.
+fn pretrain_planner(t: &mut JointTrainer, updates: usize) -> Result<()> {
+    let b = bar(updates as u64, "planner")?;
+    for k in 1..=updates {
+        let s = t.plan.update()?;
+        b.set_position(k as u64);
+        b.set_message(format!("plan satisfaction {:.2}", s.satisfaction));
+        if s.satisfaction >= 0.95 {
+            break;
+        }
+    }
+    b.finish_and_clear();
+    let init = t.plan.config().lambda_init;
+    t.plan.set_lambda(init);
+    Ok(())
+}
+
+/// Runs `schrl train`.
+pub fn train(args: TrainArgs) -> Result<()> {
+    if !(0.0..=1.0).contains(&args.target) {
+        bail!("--target must be a fraction in [0, 1], got {}", args.target);
+    }
+    let start = std::time::Instant::now();
+    let mut trainer = if args.resume {
+        if !run_dir::exists(&args.out) {
+            bail!("--resume: {} holds no joint run", args.out.display());
+        }
+        run_dir::load(&args.out)?
+    } else {
+        if run_dir::exists(&args.out) && !args.force {
+            bail!("{} already holds a run; pass --force to replace it or --resume", args.out.display());
+        }
+        let task = load_task(args.robot, &args.task)?;
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("cannot create {}", args.out.display()))?;
+        let control = match &args.controller {
+            Some(dir) => {
+                let c = control_ckpt::load(dir)?;
+                if c.robot != args.robot {
+                    bail!("--controller {}: a {} controller, not {}", dir.display(), c.robot, args.robot);
+                }
+                c
+            }
+            None => general_controller(args.robot, args.seed, &args.out.join("general"))?,
+        };
+        let joint = JointConfig {
+            plan_batch: args.plan_batch,
+            freeze_planner: args.freeze_planner,
+            freeze_controller: args.freeze_controller,
+            ..JointConfig::default()
+        };
+        let cpg = CpgConfig {
+            seed: args.seed,
+            semantics: args.semantics,
+            method: Method::Cpg,
+            pg_weight: args.pg_weight,
+            lambda_lr: args.lambda_lr,
+            ..CpgConfig::default()
+        };
+        let mut t = JointTrainer::new(task, joint, cpg, control)?;
+        if !args.freeze_planner && args.pretrain_updates > 0 {
+            pretrain_planner(&mut t, args.pretrain_updates)?;
+        }
+        t
+    };
+    let metrics_path = args.out.join("metrics.jsonl");
+    let mut history: Vec<JointMetrics> =
+        if args.resume { super::read_jsonl(&metrics_path)? } else { Vec::new() };
+    history.retain(|m| m.iteration <= trainer.iterations);
+    let mut log = std::fs::File::create(&metrics_path)
+        .with_context(|| format!("cannot write {}", metrics_path.display()))?;
+    for m in &history {
+        writeln!(log, "{}", serde_json::to_string(m)?)?;
+    }
+    let b = bar(args.steps as u64, "joint")?;
+    b.set_position(trainer.env_steps as u64);
+    while trainer.env_steps < args.steps {
+        let m = trainer.iterate()?;
+        writeln!(log, "{}", serde_json::to_string(&m)?)?;
+        b.set_position(m.env_steps.min(args.steps) as u64);
+        history.push(m);
+        let recent = &history[history.len().saturating_sub(20)..];
+        let sat = recent.iter().map(|m| m.satisfaction).sum::<f64>() / recent.len() as f64;
+        let plan = recent.iter().map(|m| m.plan_satisfaction).sum::<f64>() / recent.len() as f64;
+        b.set_message(format!(
+            "satisfaction {sat:.2} (plans {plan:.2}) λ {:.2}",
+            trainer.plan.lagrangian().lambda
+        ));
+        if trainer.iterations % 50 == 0 {
+            run_dir::save(&args.out, &trainer, true)?;
+        }
+        if recent.len() == 20 && sat >= args.target {
+            break;
+        }
+    }
+    b.finish_and_clear();
+    run_dir::save(&args.out, &trainer, true)?;
+    save_curve(&history, &args.out.join("training_curve.png"))?;
+    println!(
+        "trained {} on {} for {} iterations, {} environment steps, in {:.1} s; run in {}",
+        trainer.task.robot,
+        trainer.task.name,
+        trainer.iterations,
+        trainer.env_steps,
+        start.elapsed().as_secs_f64(),
+        args.out.display()
+    );
+    if args.eval_groups > 0 {
+        let eval = evaluate_task(
+            &trainer.task,
+            trainer.plan.planner(),
+            &trainer.control.controller(),
+            args.eval_groups,
+            100,
+            2024,
+        )?;
+        let png = args.out.join("episodes.png");
+        draw(&trainer.task, &eval, &png, true)?;
+        println!("wrote {}", png.display());
+        print_eval(&eval);
+    }
+    Ok(())
+}
+
+/// Satisfaction of runs (orange) and of planned paths (blue), 0–1, on top; λ below;
+/// x: environment steps.
+fn save_curve(history: &[JointMetrics], out: &Path) -> Result<()> {
+    let series = |f: &dyn Fn(&JointMetrics) -> f64| -> Vec<(f64, f64)> {
+        // A moving average over 20 iterations, so the curve shows the trend.
+        (0..history.len())
+            .map(|i| {
+                let w = &history[i.saturating_sub(19)..=i];
+                (history[i].env_steps as f64, w.iter().map(f).sum::<f64>() / w.len() as f64)
+            })
+            .collect()
+    };
+    let panels = [
+        ChartPanel {
+            series: vec![series(&|m| m.satisfaction), series(&|m| m.plan_satisfaction)],
+            y_range: Some((0.0, 1.0)),
+        },
+        ChartPanel { series: vec![series(&|m| m.lambda)], y_range: None },
+    ];
+    sim::render::save_chart(&panels, out, true)?;
+    Ok(())
+}
+
+fn print_eval(e: &TaskEval) {
+    let (sm, ss) = mean_std(&e.satisfaction);
+    println!("satisfaction: {sm:.3} ± {ss:.3}");
+    if e.steps_to_reach.is_empty() {
+        println!("steps to reach: -");
+    } else {
+        let (tm, ts) = mean_std(&e.steps_to_reach);
+        println!("steps to reach: {tm:.1} ± {ts:.1}");
+    }
+    println!("failures: {} collisions, {} time-outs", e.collisions, e.timeouts);
+}
+
+fn draw(task: &Task, e: &TaskEval, out: &Path, force: bool) -> Result<()> {
+    let mut scene = Scene::new(task.map.clone());
+    scene.goals = task.goals.iter().map(|g| Goal { center: g.center.clone(), radius: g.radius }).collect();
+    for run in e.examples.iter().take(4) {
+        scene.paths.push(Polyline { points: run.planned.clone(), kind: PathKind::Planned });
+        scene.paths.push(Polyline { points: run.trajectory.clone(), kind: PathKind::Executed });
+    }
+    sim::render::save(&scene, out, force)?;
+    Ok(())
+}
+
+/// Runs `schrl eval`.
+pub fn eval(args: EvalArgs) -> Result<()> {
+    if args.groups == 0 || args.per_group == 0 {
+        bail!("--groups and --per-group must be at least 1");
+    }
+    let t = run_dir::load(&args.ckpt)?;
+    let e = evaluate_task(
+        &t.task,
+        t.plan.planner(),
+        &t.control.controller(),
+        args.groups,
+        args.per_group,
+        args.seed,
+    )?;
+    if let Some(out) = &args.out {
+        draw(&t.task, &e, out, args.force)?;
+        println!("wrote {}", out.display());
+    }
+    print_eval(&e);
+    Ok(())
+}

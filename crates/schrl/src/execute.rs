@@ -1,0 +1,159 @@
+//! Executing plans: the controller drives the robot through a path's waypoints, and
+//! the task is judged on what the robot actually did.
+//!
+//! A run follows the waypoints in order: the environment's goal is the current
+//! waypoint; on reaching it (the robot's reach radius) the next one becomes the goal.
+//! The run ends when the last waypoint is reached (completed), on a collision, or at
+//! the task's step limit. It satisfies the task when it completed and the spec holds
+//! on the *executed* path: the start followed by the robot's positions at the moments
+//! it reached each waypoint. Steps to reach: environment steps until the last
+//! waypoint was reached.
+
+use serde::{Deserialize, Serialize};
+use sim::{Env, Step};
+
+/// How a run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Outcome {
+    /// Every waypoint was reached.
+    Completed,
+    /// The robot touched an obstacle.
+    Collided,
+    /// The step limit ran out first.
+    TimedOut,
+}
+
+/// What the dispatcher wants after a step.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Dispatch {
+    /// Keep driving to the current waypoint.
+    Continue,
+    /// The current waypoint was reached: drive to this one next.
+    NewGoal(Vec<f64>),
+    /// The run is over.
+    Done(Outcome),
+}
+
+/// Hands a path's waypoints to the controller one at a time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WaypointDispatcher {
+    waypoints: Vec<Vec<f64>>,
+    next: usize,
+    limit: usize,
+    reached: Vec<Vec<f64>>,
+    outcome: Option<Outcome>,
+    steps: usize,
+}
+
+impl WaypointDispatcher {
+    /// A run from `start` through `waypoints` (the path without its start) with at
+    /// most `limit` environment steps.
+    pub fn new(start: Vec<f64>, waypoints: Vec<Vec<f64>>, limit: usize) -> Self {
+        let outcome = waypoints.is_empty().then_some(Outcome::Completed);
+        Self { waypoints, next: 0, limit, reached: vec![start], outcome, steps: 0 }
+    }
+
+    /// The waypoint being driven to.
+    pub fn current(&self) -> Option<&[f64]> {
+        self.waypoints.get(self.next).map(|w| w.as_slice())
+    }
+
+    /// Accounts for one environment step that left the robot at `position`.
+    pub fn after_step(&mut self, step: &Step, position: &[f64]) -> Dispatch {
+        if let Some(o) = self.outcome {
+            return Dispatch::Done(o);
+        }
+        self.steps += 1;
+        if step.reached {
+            self.reached.push(position.to_vec());
+            self.next += 1;
+            if self.next == self.waypoints.len() {
+                self.outcome = Some(Outcome::Completed);
+                return Dispatch::Done(Outcome::Completed);
+            }
+        }
+        if step.collided {
+            self.outcome = Some(Outcome::Collided);
+            return Dispatch::Done(Outcome::Collided);
+        }
+        if self.steps >= self.limit || step.truncated {
+            self.outcome = Some(Outcome::TimedOut);
+            return Dispatch::Done(Outcome::TimedOut);
+        }
+        if step.reached { Dispatch::NewGoal(self.waypoints[self.next].clone()) } else { Dispatch::Continue }
+    }
+
+    /// The start and the positions where waypoints were reached, in order.
+    pub fn executed_path(&self) -> &[Vec<f64>] {
+        &self.reached
+    }
+
+    /// How the run ended, once it has.
+    pub fn outcome(&self) -> Option<Outcome> {
+        self.outcome
+    }
+
+    /// Environment steps taken.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// Waypoints reached so far.
+    pub fn reached_count(&self) -> usize {
+        self.reached.len() - 1
+    }
+}
+
+/// One executed plan.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Execution {
+    /// The planned path (start first).
+    pub planned: Vec<Vec<f64>>,
+    /// The start and the positions where waypoints were reached.
+    pub executed: Vec<Vec<f64>>,
+    /// Every position the robot passed through.
+    pub trajectory: Vec<Vec<f64>>,
+    /// How it ended.
+    pub outcome: Outcome,
+    /// Environment steps taken.
+    pub steps: usize,
+    /// Sum of the environment's rewards (distance progress plus reach bonuses).
+    pub control_return: f64,
+    /// Hard robustness of the executed path (−∞ when it did not complete).
+    pub robustness: f64,
+}
+
+impl Execution {
+    /// Completed, and the spec holds on the executed path.
+    pub fn satisfied(&self) -> bool {
+        self.outcome == Outcome::Completed && self.robustness > 0.0
+    }
+}
+
+/// Hard robustness of an executed path under `spec` (−∞ unless it has every
+/// waypoint).
+pub fn executed_robustness(spec: &stl::Spec, executed: &[Vec<f64>], steps: usize) -> f64 {
+    if executed.len() != steps + 1 {
+        return f64::NEG_INFINITY;
+    }
+    let flat: Vec<f64> = executed.iter().flatten().copied().collect();
+    spec.robustness(&flat, &stl::Semantics::hard()).unwrap_or(f64::NEG_INFINITY)
+}
+
+/// Puts `env` at a path's start with its first waypoint as the goal.
+pub fn start_run(
+    env: &mut dyn Env,
+    seed: u64,
+    path: &[Vec<f64>],
+    limit: usize,
+    obs: &mut [f64],
+) -> Result<WaypointDispatcher, sim::EnvError> {
+    env.set_max_steps(limit);
+    env.reset_into(seed, Some(&path[0]), obs)?;
+    let d = WaypointDispatcher::new(path[0].clone(), path[1..].to_vec(), limit);
+    if let Some(w) = d.current() {
+        env.set_goal(w)?;
+        env.observe(obs);
+    }
+    Ok(d)
+}

@@ -1,0 +1,111 @@
+//! Executing plans and joint training: the waypoint dispatcher, satisfaction of
+//! hand-made runs, and a tiny joint run.
+
+use schrl::control::{ControlConfig, ControlTrainer, PpoConfig};
+use schrl::cpg::CpgConfig;
+use schrl::execute::{Dispatch, Execution, Outcome, WaypointDispatcher, executed_robustness};
+use schrl::joint::{JointConfig, JointTrainer, mean_std};
+use schrl::tasks::{Task, TaskKind};
+use sim::{Robot, Step};
+
+fn step(reached: bool, collided: bool) -> Step {
+    Step { reward: 0.0, reached, collided, truncated: false }
+}
+
+#[test]
+fn dispatcher_advances_finishes_times_out_and_stops_on_collision() {
+    let wps = vec![vec![1.0, 0.0], vec![2.0, 0.0]];
+    let mut d = WaypointDispatcher::new(vec![0.0, 0.0], wps.clone(), 10);
+    assert_eq!(d.current(), Some(&[1.0, 0.0][..]));
+    assert_eq!(d.after_step(&step(false, false), &[0.5, 0.0]), Dispatch::Continue);
+    assert_eq!(d.after_step(&step(true, false), &[0.9, 0.0]), Dispatch::NewGoal(vec![2.0, 0.0]));
+    assert_eq!(d.after_step(&step(true, false), &[1.8, 0.1]), Dispatch::Done(Outcome::Completed));
+    assert_eq!(d.executed_path(), &[vec![0.0, 0.0], vec![0.9, 0.0], vec![1.8, 0.1]]);
+    assert_eq!((d.steps(), d.outcome()), (3, Some(Outcome::Completed)));
+    // Further steps change nothing.
+    assert_eq!(d.after_step(&step(false, true), &[0.0, 0.0]), Dispatch::Done(Outcome::Completed));
+
+    let mut d = WaypointDispatcher::new(vec![0.0, 0.0], wps.clone(), 3);
+    for _ in 0..2 {
+        assert_eq!(d.after_step(&step(false, false), &[0.0, 0.0]), Dispatch::Continue);
+    }
+    assert_eq!(d.after_step(&step(false, false), &[0.0, 0.0]), Dispatch::Done(Outcome::TimedOut));
+
+    let mut d = WaypointDispatcher::new(vec![0.0, 0.0], wps, 10);
+    d.after_step(&step(true, false), &[1.0, 0.0]);
+    assert_eq!(d.after_step(&step(false, true), &[1.2, 0.0]), Dispatch::Done(Outcome::Collided));
+    assert_eq!(d.reached_count(), 1);
+}
+
+#[test]
+fn satisfaction_is_judged_on_the_executed_path() {
+    let task = Task::point(TaskKind::Seq);
+    let spec = task.spec();
+    // Two waypoints per goal, in order, inside each goal's disc: satisfies.
+    let goals: Vec<Vec<f64>> = task.goals.iter().map(|g| g.center.clone()).collect();
+    let mut good = vec![vec![1.5, -1.5]];
+    for g in &goals {
+        good.push(vec![g[0] + 0.1, g[1]]);
+        good.push(vec![g[0], g[1] - 0.1]);
+    }
+    assert!(executed_robustness(&spec, &good, task.steps) > 0.0);
+    // The same goals in the wrong order: violated.
+    let mut swapped = good.clone();
+    swapped.swap(1, 3);
+    swapped.swap(2, 4);
+    assert!(executed_robustness(&spec, &swapped, task.steps) < 0.0);
+    // A run that stopped early cannot satisfy, whatever it visited.
+    assert_eq!(executed_robustness(&spec, &good[..5], task.steps), f64::NEG_INFINITY);
+    let run = |outcome, executed: Vec<Vec<f64>>| Execution {
+        planned: good.clone(),
+        robustness: executed_robustness(&spec, &executed, task.steps),
+        executed,
+        trajectory: vec![],
+        outcome,
+        steps: 100,
+        control_return: 0.0,
+    };
+    assert!(run(Outcome::Completed, good.clone()).satisfied());
+    assert!(!run(Outcome::Collided, good.clone()).satisfied());
+    assert!(!run(Outcome::Completed, swapped).satisfied());
+}
+
+#[test]
+fn mean_std_is_the_sample_statistic() {
+    let (m, s) = mean_std(&[0.9, 1.0, 0.95]);
+    assert!((m - 0.95).abs() < 1e-12 && (s - 0.05).abs() < 1e-12);
+}
+
+#[test]
+fn a_tiny_joint_run_raises_the_spec_score_and_trains_both_sides() {
+    let mut cc = ControlConfig::for_robot(Robot::Point);
+    cc.ppo = PpoConfig { rollout: 1000, minibatch: 100, epochs: 2, ..PpoConfig::reference() };
+    let control = ControlTrainer::new(cc).unwrap();
+    let before = control.policy.params.clone();
+    let task = Task::point(TaskKind::Branch);
+    let cfg = JointConfig { plan_batch: 8, ..JointConfig::default() };
+    let mut t = JointTrainer::new(task, cfg, CpgConfig { seed: 3, ..CpgConfig::default() }, control).unwrap();
+    let mut rho = Vec::new();
+    let mut ppo_updates = 0;
+    for _ in 0..60 {
+        let m = t.iterate().unwrap();
+        rho.push(m.plan_rho);
+        ppo_updates += m.control.is_some() as usize;
+    }
+    let early: f64 = rho[..10].iter().sum::<f64>() / 10.0;
+    let late: f64 = rho[rho.len() - 10..].iter().sum::<f64>() / 10.0;
+    assert!(late > early + 1.0, "spec score did not rise: {early} → {late}");
+    assert!(ppo_updates > 0 && t.control.policy.params != before, "the controller never trained");
+    assert!(t.env_steps > 0);
+}
+
+#[test]
+fn a_task_for_another_robot_is_refused() {
+    let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Car)).unwrap();
+    let err =
+        JointTrainer::new(Task::point(TaskKind::Seq), JointConfig::default(), CpgConfig::default(), control)
+            .err()
+            .unwrap()
+            .to_string();
+    assert!(err.contains("the task is for the point but the controller drives the car"), "{err}");
+}
