@@ -42,15 +42,8 @@ pub struct TrainArgs {
     /// Environments stepped together.
     #[arg(long)]
     num_envs: Option<usize>,
-    /// Run directory: checkpoint, metrics.jsonl, training_curve.png.
-    #[arg(long)]
-    out: PathBuf,
-    /// Replace an existing run in --out.
-    #[arg(long)]
-    force: bool,
-    /// Continue the run saved in --out (up to --steps, or its own budget).
-    #[arg(long, conflicts_with = "force")]
-    resume: bool,
+    #[command(flatten)]
+    run: super::RunDirArgs,
     /// Save a checkpoint every this many updates (and at the end).
     #[arg(long, default_value_t = 25)]
     save_every: usize,
@@ -99,15 +92,15 @@ fn parse_map(name: &str) -> Result<Map> {
 }
 
 fn train(args: TrainArgs) -> Result<()> {
-    let mut trainer = if args.resume {
-        if !checkpoint::exists(&args.out) {
-            bail!("--resume: {} holds no controller checkpoint", args.out.display());
+    let mut trainer = if args.run.resume {
+        if !checkpoint::exists(&args.run.out) {
+            bail!("--resume: {} holds no controller checkpoint", args.run.out.display());
         }
-        let mut t = checkpoint::load(&args.out)?;
+        let mut t = checkpoint::load(&args.run.out)?;
         if let Some(robot) = args.robot
             && robot != t.robot
         {
-            bail!("--resume: {} is a {} run, not {robot}", args.out.display(), t.robot);
+            bail!("--resume: {} is a {} run, not {robot}", args.run.out.display(), t.robot);
         }
         if let Some(steps) = args.steps {
             t.config.total_steps = steps;
@@ -115,10 +108,10 @@ fn train(args: TrainArgs) -> Result<()> {
         t
     } else {
         let Some(robot) = args.robot else { bail!("--robot is required (point, car or drone)") };
-        if checkpoint::exists(&args.out) && !args.force {
+        if checkpoint::exists(&args.run.out) && !args.run.force {
             bail!(
                 "{} already holds a controller run; pass --force to replace it or --resume",
-                args.out.display()
+                args.run.out.display()
             );
         }
         let mut config = ControlConfig::for_robot(robot);
@@ -138,10 +131,11 @@ fn train(args: TrainArgs) -> Result<()> {
         }
         ControlTrainer::new(config)?
     };
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
-    let metrics_path = args.out.join("metrics.jsonl");
+    std::fs::create_dir_all(&args.run.out)
+        .with_context(|| format!("cannot create {}", args.run.out.display()))?;
+    let metrics_path = args.run.out.join("metrics.jsonl");
     let mut history: Vec<ControlMetrics> =
-        if args.resume { super::read_jsonl(&metrics_path)? } else { Vec::new() };
+        if args.run.resume { super::read_jsonl(&metrics_path)? } else { Vec::new() };
     // Keep only the lines the checkpoint covers, so a resumed log has no duplicates.
     history.retain(|m| m.update <= trainer.updates);
     let mut log = std::fs::File::create(&metrics_path)
@@ -167,20 +161,20 @@ fn train(args: TrainArgs) -> Result<()> {
         ));
         history.push(m);
         if trainer.updates % args.save_every.max(1) == 0 {
-            checkpoint::save(&args.out, &trainer, true)?;
+            checkpoint::save(&args.run.out, &trainer, true)?;
         }
     }
     bar.finish_and_clear();
-    checkpoint::save(&args.out, &trainer, true)?;
+    checkpoint::save(&args.run.out, &trainer, true)?;
     let wall = start.elapsed().as_secs_f64();
-    let curve = args.out.join("training_curve.png");
+    let curve = args.run.out.join("training_curve.png");
     save_curve(&history, &curve)?;
     println!(
         "trained the {} for {} environment steps in {wall:.1} s ({:.0} steps/s); run in {}",
         trainer.robot,
         trainer.steps,
         (trainer.steps - first_step) as f64 / wall.max(1e-9),
-        args.out.display()
+        args.run.out.display()
     );
     if args.eval_episodes > 0 {
         let map = parse_map(&trainer.config.map)?;

@@ -22,3 +22,17 @@ pub fn read_jsonl<T: serde::de::DeserializeOwned>(path: &std::path::Path) -> any
         })
         .collect()
 }
+
+/// Where a training run lives, and what to do when it already exists.
+#[derive(clap::Args, Debug)]
+pub struct RunDirArgs {
+    /// Run directory: checkpoint, metrics.jsonl, training_curve.png.
+    #[arg(long)]
+    pub out: std::path::PathBuf,
+    /// Replace an existing run in --out.
+    #[arg(long)]
+    pub force: bool,
+    /// Continue the run saved in --out (up to --steps).
+    #[arg(long, conflicts_with = "force")]
+    pub resume: bool,
+}

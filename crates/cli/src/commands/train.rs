@@ -58,15 +58,8 @@ pub struct TrainArgs {
     /// Keep the controller fixed (ablation).
     #[arg(long)]
     freeze_controller: bool,
-    /// Run directory.
-    #[arg(long)]
-    out: PathBuf,
-    /// Replace an existing run.
-    #[arg(long)]
-    force: bool,
-    /// Continue the run in --out (to --steps).
-    #[arg(long, conflicts_with = "force")]
-    resume: bool,
+    #[command(flatten)]
+    run: super::RunDirArgs,
     /// Evaluation groups of 100 runs after training (0: none).
     #[arg(long, default_value_t = 5)]
     eval_groups: usize,
@@ -158,18 +151,18 @@ pub fn train(args: TrainArgs) -> Result<()> {
         bail!("--target must be a fraction in [0, 1], got {}", args.target);
     }
     let start = std::time::Instant::now();
-    let mut trainer = if args.resume {
-        if !run_dir::exists(&args.out) {
-            bail!("--resume: {} holds no joint run", args.out.display());
+    let mut trainer = if args.run.resume {
+        if !run_dir::exists(&args.run.out) {
+            bail!("--resume: {} holds no joint run", args.run.out.display());
         }
-        run_dir::load(&args.out)?
+        run_dir::load(&args.run.out)?
     } else {
-        if run_dir::exists(&args.out) && !args.force {
-            bail!("{} already holds a run; pass --force to replace it or --resume", args.out.display());
+        if run_dir::exists(&args.run.out) && !args.run.force {
+            bail!("{} already holds a run; pass --force to replace it or --resume", args.run.out.display());
         }
         let task = load_task(args.robot, &args.task)?;
-        std::fs::create_dir_all(&args.out)
-            .with_context(|| format!("cannot create {}", args.out.display()))?;
+        std::fs::create_dir_all(&args.run.out)
+            .with_context(|| format!("cannot create {}", args.run.out.display()))?;
         let control = match &args.controller {
             Some(dir) => {
                 let c = control_ckpt::load(dir)?;
@@ -178,7 +171,7 @@ pub fn train(args: TrainArgs) -> Result<()> {
                 }
                 c
             }
-            None => general_controller(args.robot, args.seed, &args.out.join("general"))?,
+            None => general_controller(args.robot, args.seed, &args.run.out.join("general"))?,
         };
         let joint = JointConfig {
             plan_batch: args.plan_batch,
@@ -200,9 +193,9 @@ pub fn train(args: TrainArgs) -> Result<()> {
         }
         t
     };
-    let metrics_path = args.out.join("metrics.jsonl");
+    let metrics_path = args.run.out.join("metrics.jsonl");
     let mut history: Vec<JointMetrics> =
-        if args.resume { super::read_jsonl(&metrics_path)? } else { Vec::new() };
+        if args.run.resume { super::read_jsonl(&metrics_path)? } else { Vec::new() };
     history.retain(|m| m.iteration <= trainer.iterations);
     let mut log = std::fs::File::create(&metrics_path)
         .with_context(|| format!("cannot write {}", metrics_path.display()))?;
@@ -224,15 +217,15 @@ pub fn train(args: TrainArgs) -> Result<()> {
             trainer.plan.lagrangian().lambda
         ));
         if trainer.iterations % 50 == 0 {
-            run_dir::save(&args.out, &trainer, true)?;
+            run_dir::save(&args.run.out, &trainer, true)?;
         }
         if recent.len() == 20 && sat >= args.target {
             break;
         }
     }
     b.finish_and_clear();
-    run_dir::save(&args.out, &trainer, true)?;
-    save_curve(&history, &args.out.join("training_curve.png"))?;
+    run_dir::save(&args.run.out, &trainer, true)?;
+    save_curve(&history, &args.run.out.join("training_curve.png"))?;
     println!(
         "trained {} on {} for {} iterations, {} environment steps, in {:.1} s; run in {}",
         trainer.task.robot,
@@ -240,7 +233,7 @@ pub fn train(args: TrainArgs) -> Result<()> {
         trainer.iterations,
         trainer.env_steps,
         start.elapsed().as_secs_f64(),
-        args.out.display()
+        args.run.out.display()
     );
     if args.eval_groups > 0 {
         let eval = evaluate_task(
@@ -251,7 +244,7 @@ pub fn train(args: TrainArgs) -> Result<()> {
             100,
             2024,
         )?;
-        let png = args.out.join("episodes.png");
+        let png = args.run.out.join("episodes.png");
         draw(&trainer.task, &eval, &png, true)?;
         println!("wrote {}", png.display());
         print_eval(&eval);
