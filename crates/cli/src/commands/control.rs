@@ -133,16 +133,9 @@ fn train(args: TrainArgs) -> Result<()> {
     };
     std::fs::create_dir_all(&args.run.out)
         .with_context(|| format!("cannot create {}", args.run.out.display()))?;
-    let metrics_path = args.run.out.join("metrics.jsonl");
-    let mut history: Vec<ControlMetrics> =
-        if args.run.resume { super::read_jsonl(&metrics_path)? } else { Vec::new() };
-    // Keep only the lines the checkpoint covers, so a resumed log has no duplicates.
-    history.retain(|m| m.update <= trainer.updates);
-    let mut log = std::fs::File::create(&metrics_path)
-        .with_context(|| format!("cannot write {}", metrics_path.display()))?;
-    for m in &history {
-        writeln!(log, "{}", serde_json::to_string(m)?)?;
-    }
+    let updates = trainer.updates;
+    let (mut history, mut log) =
+        super::open_metrics_log(&args.run.out, args.run.resume, |m: &ControlMetrics| m.update <= updates)?;
     let total = trainer.total_updates();
     let bar = ProgressBar::new(total as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} updates {elapsed_precise} {msg}")?);

@@ -193,15 +193,9 @@ pub fn train(args: TrainArgs) -> Result<()> {
         }
         t
     };
-    let metrics_path = args.run.out.join("metrics.jsonl");
-    let mut history: Vec<JointMetrics> =
-        if args.run.resume { super::read_jsonl(&metrics_path)? } else { Vec::new() };
-    history.retain(|m| m.iteration <= trainer.iterations);
-    let mut log = std::fs::File::create(&metrics_path)
-        .with_context(|| format!("cannot write {}", metrics_path.display()))?;
-    for m in &history {
-        writeln!(log, "{}", serde_json::to_string(m)?)?;
-    }
+    let done = trainer.iterations;
+    let (mut history, mut log) =
+        super::open_metrics_log(&args.run.out, args.run.resume, |m: &JointMetrics| m.iteration <= done)?;
     let b = bar(args.steps as u64, "joint")?;
     b.set_position(trainer.env_steps as u64);
     while trainer.env_steps < args.steps {
