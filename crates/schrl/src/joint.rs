@@ -228,6 +228,7 @@ impl JointTrainer {
         let mut values = vec![0.0f32; n];
         let mut rewards = vec![0.0f64; n];
         let mut ended = vec![false; n];
+        let mut a = vec![0.0f64; ad];
         let mut active: Vec<bool> = runs.iter().map(|r| r.dispatcher.outcome().is_none()).collect();
         let norm = c.config.ppo.norm_obs;
         while active.iter().any(|a| *a) {
@@ -252,7 +253,7 @@ impl JointTrainer {
                 if !active[i] {
                     continue;
                 }
-                let a: Vec<f64> = actions[i * ad..(i + 1) * ad].iter().map(|v| *v as f64).collect();
+                a.iter_mut().zip(&actions[i * ad..(i + 1) * ad]).for_each(|(d, s)| *d = *s as f64);
                 let obs = &mut raw[i * od..(i + 1) * od];
                 let step: Step = env.step_into(&a, obs)?;
                 let run = &mut runs[i];
