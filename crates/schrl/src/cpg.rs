@@ -111,7 +111,10 @@ pub struct CpgConfig {
     pub lambda_lr: f64,
     /// Initial λ.
     pub lambda_init: f64,
-    /// Semantics of ρ in the loss (the authors' soft STL, α = 2, by default).
+    /// Semantics of ρ in the loss: the authors' soft STL, sharper than their α = 2
+    /// (α = 10): segment clearances are tenths of a metre and α = 2 averages them
+    /// away (Point Seq, 2000 updates: 8 % of sampled plans satisfied at α = 2, 60 %
+    /// at α = 10).
     pub semantics: Semantics,
     /// Objective.
     pub method: Method,
@@ -129,7 +132,7 @@ impl Default for CpgConfig {
             epsilon: 0.05,
             lambda_lr: 0.05,
             lambda_init: 1.0,
-            semantics: Semantics::soft(2.0),
+            semantics: Semantics::soft(10.0),
             method: Method::Cpg,
             seed: 0,
         }
@@ -210,6 +213,11 @@ impl PlanTrainer {
     pub fn with_control_reward(mut self, reward: impl ControlReward + 'static) -> Self {
         self.control = Box::new(reward);
         self
+    }
+
+    /// Replaces the low-level reward source [`PlanTrainer::update`] uses.
+    pub fn set_control_reward(&mut self, reward: Box<dyn ControlReward>) {
+        self.control = reward;
     }
 
     /// The planner.

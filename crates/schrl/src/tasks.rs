@@ -82,6 +82,20 @@ pub struct GoalRegion {
     pub radius: f64,
 }
 
+/// Where a task's `safe` predicate checks the clearance from obstacles.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SafeAlong {
+    /// Along the straight segment that arrives at each waypoint (from the one
+    /// before it), the path the controller is asked to drive. The default: with
+    /// clearance checked at waypoints only, planned segments cut through the walls
+    /// and every executed run on the walls map collided (measured, issue 7).
+    #[default]
+    Segments,
+    /// At the waypoints only: the paper's literal `□ safe(map)` on the plan's states.
+    Waypoints,
+}
+
 /// A task: spec, goals, plan length, start region, map, robot.
 #[derive(Clone, Debug)]
 pub struct Task {
@@ -105,6 +119,8 @@ pub struct Task {
     pub step_limit: usize,
     /// Clearance `safe` keeps from obstacles.
     pub safe_radius: f64,
+    /// Where `safe` is checked: along the segments the robot drives, or at waypoints.
+    pub safe_along: SafeAlong,
     /// Waypoint index from which the Signal task's counter holds.
     pub counter_from: Option<usize>,
     /// The TOML text it was loaded from (kept so runs can store their task).
@@ -132,6 +148,8 @@ struct TaskToml {
     steps: usize,
     step_limit: usize,
     safe_radius: f64,
+    #[serde(default)]
+    safe_along: SafeAlong,
     counter_from: Option<usize>,
     start: StartToml,
     goal: Vec<GoalRegion>,
@@ -312,6 +330,7 @@ impl Task {
             map,
             step_limit: t.step_limit,
             safe_radius: t.safe_radius,
+            safe_along: t.safe_along,
             counter_from: t.counter_from,
             toml: toml_text.to_string(),
         })
@@ -329,7 +348,8 @@ impl Task {
             .iter()
             .map(|g| (g.name.clone(), Arc::new(Ball::new(g.center.clone(), g.radius)) as Arc<dyn Predicate>))
             .collect();
-        out.push(("safe".into(), Arc::new(MapClearance::new(self.map.clone(), self.safe_radius))));
+        let safe = MapClearance::new(self.map.clone(), self.safe_radius).along(self.safe_along);
+        out.push(("safe".into(), Arc::new(safe)));
         if let Some(step) = self.counter_from {
             out.push(("counter".into(), Arc::new(AfterStep { step })));
         }
@@ -379,6 +399,7 @@ impl Task {
 pub struct MapClearance {
     map: Map,
     radius: f64,
+    along: SafeAlong,
 }
 
 /// Clearance reported where a map has no obstacle at all.
@@ -387,7 +408,12 @@ pub const OPEN_CLEARANCE: f64 = 100.0;
 impl MapClearance {
     /// Clearance from `map`'s obstacles for a robot of `radius`.
     pub fn new(map: Map, radius: f64) -> Self {
-        Self { map, radius }
+        Self { map, radius, along: SafeAlong::Waypoints }
+    }
+
+    /// The same clearance, checked along segments or at waypoints.
+    pub fn along(self, along: SafeAlong) -> Self {
+        Self { along, ..self }
     }
 }
 
@@ -410,6 +436,39 @@ impl Predicate for MapClearance {
 
     fn required_dim(&self) -> usize {
         self.map.dim()
+    }
+
+    fn value_on_path(&self, path: &[f64], dim: usize, t: usize) -> f64 {
+        if self.along == SafeAlong::Waypoints || t == 0 {
+            return self.value(t, &path[t * dim..(t + 1) * dim]);
+        }
+        let d = self.map.segment_sdf(&path[(t - 1) * dim..t * dim], &path[t * dim..(t + 1) * dim]);
+        (d - self.radius).min(OPEN_CLEARANCE)
+    }
+
+    fn value_and_grad_on_path(
+        &self,
+        path: &[f64],
+        dim: usize,
+        t: usize,
+        scale: f64,
+        grad: &mut [f64],
+    ) -> f64 {
+        if self.along == SafeAlong::Waypoints || t == 0 {
+            let at = t * dim..(t + 1) * dim;
+            return self.value_and_grad(t, &path[at.clone()], scale, &mut grad[at]);
+        }
+        let (mut ga, mut gb) = ([0.0; 3], [0.0; 3]);
+        let (a, b) = (&path[(t - 1) * dim..t * dim], &path[t * dim..(t + 1) * dim]);
+        let d = self.map.segment_sdf_grad(a, b, &mut ga, &mut gb) - self.radius;
+        if d >= OPEN_CLEARANCE {
+            return OPEN_CLEARANCE;
+        }
+        for k in 0..dim {
+            grad[(t - 1) * dim + k] += scale * ga[k];
+            grad[t * dim + k] += scale * gb[k];
+        }
+        d
     }
 }
 

@@ -42,11 +42,10 @@ fn point_seq_is_the_papers_sequence() {
 
 /// Writes a task pair into a fresh directory and loads it.
 fn load(toml_text: &str, spec_text: &str) -> Result<Task, schrl::tasks::TaskError> {
-    let dir = std::env::temp_dir().join(format!(
-        "schrl-task-{}-{}",
-        std::process::id(),
-        toml_text.len() * 31 + spec_text.len()
-    ));
+    // One directory per call: tests run in parallel and texts may share a length.
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("schrl-task-{}-{n}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("t.toml"), toml_text).unwrap();
     std::fs::write(dir.join("t.stl"), spec_text).unwrap();
@@ -104,4 +103,52 @@ fn malformed_tasks_name_the_file_and_the_problem() {
     }
     let err = Task::from_file(Path::new("/nonexistent/task.toml")).unwrap_err().to_string();
     assert!(err.contains("/nonexistent/task.toml") && err.contains("cannot read"), "{err}");
+}
+
+/// Issue 7: plans whose waypoints were all clear cut through the walls between
+/// them, and every executed run collided. `safe` now checks the segments.
+#[test]
+fn safe_rejects_a_segment_through_a_wall_between_clear_waypoints() {
+    // From the south-east room straight north through the bar at x = 0.6: both
+    // waypoints are in free space, the segment between them is not.
+    let through = [0.6, -1.0, 0.6, -1.0, 0.6, 1.0];
+    let segments = load(GOOD, "G[1,2] safe").unwrap();
+    assert!(segments.spec().robustness(&through, &stl::Semantics::hard()).unwrap() < -0.5);
+    let waypoints = load(
+        &GOOD.replace("safe_radius = 0.1", "safe_radius = 0.1\nsafe_along = \"waypoints\""),
+        "G[1,2] safe",
+    )
+    .unwrap();
+    assert!(waypoints.spec().robustness(&through, &stl::Semantics::hard()).unwrap() > 0.0);
+    // Through the door instead: satisfied.
+    let door = [2.0, -1.0, 2.0, -1.0, 2.0, 1.0];
+    assert!(segments.spec().robustness(&door, &stl::Semantics::hard()).unwrap() > 0.0);
+}
+
+#[test]
+fn segment_safety_gradient_reaches_both_ends_and_matches_finite_differences() {
+    let task = load(GOOD, "G[1,2] safe").unwrap();
+    let spec = task.spec();
+    let path = [1.1, -1.0, 1.0, -0.9, 1.1, 1.0];
+    let sem = stl::Semantics::hard();
+    let (rho, grad) = spec.gradient(&path, &sem).unwrap();
+    assert!(rho < 0.0);
+    // The crossing segment is the worst: its two ends (waypoints 1 and 2) get the
+    // gradient, pointing toward the door (+x).
+    assert!(grad[2] > 0.0 && grad[4] > 0.0, "{grad:?}");
+    for k in 0..path.len() {
+        let (mut up, mut down) = (path, path);
+        up[k] += 1e-5;
+        down[k] -= 1e-5;
+        let fd = (spec.robustness(&up, &sem).unwrap() - spec.robustness(&down, &sem).unwrap()) / 2e-5;
+        assert!((fd - grad[k]).abs() < 1e-4, "coordinate {k}: {fd} vs {}", grad[k]);
+    }
+}
+
+#[test]
+fn an_unknown_safe_along_is_named() {
+    let e =
+        load(&GOOD.replace("safe_radius = 0.1", "safe_radius = 0.1\nsafe_along = \"edges\""), "G[1,2] safe")
+            .unwrap_err();
+    assert!(e.to_string().contains("edges") && e.to_string().contains("line 9"), "{e}");
 }

@@ -6,6 +6,7 @@
 //! * [`robots`] — [`Point`], [`Car`] and [`Drone`]: hand-written equations of motion,
 //!   each parameter documented with its source.
 //! * [`map`] — [`WallsMap`], [`EmptyMap`], [`DuckWorld`] with exact signed distances.
+//! * [`segment`] — the clearance of straight segments (the paths between waypoints).
 //! * [`contact`] — keeping robots out of obstacles.
 //! * [`vec_env`] — N environments stepped together, deterministic under a seed.
 //! * [`render`] — pictures of maps, robots, goals, waypoints and trajectories.
@@ -30,6 +31,7 @@ pub mod map;
 pub mod render;
 pub mod robots;
 pub mod rotation;
+pub mod segment;
 pub mod vec_env;
 
 pub use env::{BoxSpace, Dynamics, Env, EnvError, GoalEnv, Step};

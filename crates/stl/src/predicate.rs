@@ -23,31 +23,61 @@ pub trait Predicate: Send + Sync {
     /// The number of state dimensions this predicate reads (it reads
     /// `state[..required_dim()]`); checked when a spec is built.
     fn required_dim(&self) -> usize;
+
+    /// The robustness at step `t` of a whole path (`path` holds its states, `dim`
+    /// numbers each). State predicates read only `path[t]` (the default); a path
+    /// predicate overrides this to read earlier states too, e.g. the clearance of the
+    /// segment that arrives at `t`.
+    fn value_on_path(&self, path: &[f64], dim: usize, t: usize) -> f64 {
+        self.value(t, &path[t * dim..(t + 1) * dim])
+    }
+
+    /// [`Predicate::value_on_path`], adding `scale ·` its gradient with respect to
+    /// the whole path into `grad` (same length as `path`).
+    fn value_and_grad_on_path(
+        &self,
+        path: &[f64],
+        dim: usize,
+        t: usize,
+        scale: f64,
+        grad: &mut [f64],
+    ) -> f64 {
+        let at = t * dim..(t + 1) * dim;
+        self.value_and_grad(t, &path[at.clone()], scale, &mut grad[at])
+    }
 }
 
-impl<P: Predicate + ?Sized> Predicate for Box<P> {
-    fn value(&self, t: usize, state: &[f64]) -> f64 {
-        (**self).value(t, state)
-    }
-    fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
-        (**self).value_and_grad(t, state, scale, grad)
-    }
-    fn required_dim(&self) -> usize {
-        (**self).required_dim()
-    }
+/// Smart pointers to predicates are predicates.
+macro_rules! forward_predicate {
+    ($($ptr:ident)::+) => {
+        impl<P: Predicate + ?Sized> Predicate for $($ptr)::+<P> {
+            fn value(&self, t: usize, state: &[f64]) -> f64 {
+                (**self).value(t, state)
+            }
+            fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
+                (**self).value_and_grad(t, state, scale, grad)
+            }
+            fn required_dim(&self) -> usize {
+                (**self).required_dim()
+            }
+            fn value_on_path(&self, path: &[f64], dim: usize, t: usize) -> f64 {
+                (**self).value_on_path(path, dim, t)
+            }
+            fn value_and_grad_on_path(
+                &self,
+                path: &[f64],
+                dim: usize,
+                t: usize,
+                scale: f64,
+                grad: &mut [f64],
+            ) -> f64 {
+                (**self).value_and_grad_on_path(path, dim, t, scale, grad)
+            }
+        }
+    };
 }
-
-impl<P: Predicate + ?Sized> Predicate for std::sync::Arc<P> {
-    fn value(&self, t: usize, state: &[f64]) -> f64 {
-        (**self).value(t, state)
-    }
-    fn value_and_grad(&self, t: usize, state: &[f64], scale: f64, grad: &mut [f64]) -> f64 {
-        (**self).value_and_grad(t, state, scale, grad)
-    }
-    fn required_dim(&self) -> usize {
-        (**self).required_dim()
-    }
-}
+forward_predicate!(Box);
+forward_predicate!(std::sync::Arc);
 
 /// A goal region: `radius − ‖state[offset..offset+d] − center‖` (the paper's reach
 /// predicate, App. D). At the centre the gradient is taken as zero.

@@ -394,8 +394,7 @@ impl Evaluator<'_> {
         let preds = &self.spec.predicates;
         self.values.clear();
         for t in 0..n {
-            let s = &path[t * dim..(t + 1) * dim];
-            self.values.extend(preds.iter().map(|p| p.value(t, s)));
+            self.values.extend(preds.iter().map(|p| p.value_on_path(path, dim, t)));
         }
         self.spec.program.forward(&self.values, n, sem, &mut self.ws);
         Ok(n)
@@ -432,12 +431,10 @@ impl Evaluator<'_> {
         let dim = self.spec.state_dim;
         let np = self.spec.predicates.len();
         for step in 0..n {
-            let s = &path[step * dim..(step + 1) * dim];
-            let g = &mut grad[step * dim..(step + 1) * dim];
             for (p, pred) in self.spec.predicates.iter().enumerate() {
                 let d = self.dvalues[step * np + p];
                 if d != 0.0 {
-                    pred.value_and_grad(step, s, d, g);
+                    pred.value_and_grad_on_path(path, dim, step, d, grad);
                 }
             }
         }

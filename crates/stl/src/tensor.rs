@@ -81,7 +81,7 @@ fn dims3(layout: &Layout, what: &str) -> candle_core::Result<(usize, usize, usiz
     }
 }
 
-/// A scalar [`Predicate`] applied pointwise to `[batch, steps, dim]`, with its exact
+/// A scalar [`Predicate`] applied at every step of `[batch, steps, dim]`, with its exact
 /// gradient as the backward pass.
 #[derive(Clone)]
 pub struct Pointwise(pub Arc<dyn Predicate>);
@@ -97,7 +97,8 @@ impl CustomOp1 for Pointwise {
             candle_core::bail!("predicate reads {} dimensions, paths have {d}", self.0.required_dim());
         }
         let x = to_f64(storage, layout)?;
-        let out: Vec<f64> = (0..b * t).map(|i| self.0.value(i % t, &x[i * d..(i + 1) * d])).collect();
+        let path = |i: usize| &x[(i / t) * t * d..(i / t + 1) * t * d];
+        let out: Vec<f64> = (0..b * t).map(|i| self.0.value_on_path(path(i), d, i % t)).collect();
         Ok((from_f64(out, storage.dtype())?, Shape::from((b, t))))
     }
 
@@ -106,9 +107,10 @@ impl CustomOp1 for Pointwise {
         let x: Vec<f64> = arg.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
         let g: Vec<f64> = grad_res.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
         let mut out = vec![0.0; x.len()];
-        for i in 0..b * t {
-            if g[i] != 0.0 {
-                self.0.value_and_grad(i % t, &x[i * d..(i + 1) * d], g[i], &mut out[i * d..(i + 1) * d]);
+        for (i, &gi) in g.iter().enumerate().take(b * t) {
+            if gi != 0.0 {
+                let at = (i / t) * t * d..(i / t + 1) * t * d;
+                self.0.value_and_grad_on_path(&x[at.clone()], d, i % t, gi, &mut out[at]);
             }
         }
         Ok(Some(Tensor::from_vec(out, (b, t, d), arg.device())?.to_dtype(arg.dtype())?))

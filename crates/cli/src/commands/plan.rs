@@ -35,7 +35,7 @@ pub struct TrainArgs {
     #[arg(long, default_value = "cpg", value_parser = parse_method)]
     method: Method,
     /// Semantics of the spec in the loss: hard, soft:<alpha> or lse:<temperature>.
-    #[arg(long, default_value = "soft:2")]
+    #[arg(long, default_value = "soft:10")]
     semantics: Semantics,
     /// Seed of parameters, starts and noise.
     #[arg(long, default_value_t = 0)]
@@ -72,6 +72,9 @@ pub struct SampleArgs {
     /// Replace the picture if it exists.
     #[arg(long)]
     force: bool,
+    /// Take each start's mean path (the deployed plan) instead of sampling.
+    #[arg(long)]
+    mean: bool,
 }
 
 fn parse_method(s: &str) -> Result<Method, String> {
@@ -166,14 +169,18 @@ fn sample(args: SampleArgs) -> Result<()> {
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
     let g0 = task.sample_starts(&mut rng, args.n)?;
     let noise = task.sample_noise(&mut rng, args.n)?;
-    let batch = loaded.planner.sample(&g0, &noise)?;
-    let rho = schrl::tasks::hard_robustness(&task.spec(), &batch.paths)?;
+    let paths = if args.mean {
+        loaded.planner.mean_path(&g0, task.steps)?
+    } else {
+        loaded.planner.sample(&g0, &noise)?.paths
+    };
+    let rho = schrl::tasks::hard_robustness(&task.spec(), &paths)?;
     let satisfied = rho.iter().filter(|r| **r > 0.0).count();
     if let Some(out) = &args.out {
         let mut scene = Scene::new(task.map.clone());
         scene.goals =
             task.goals.iter().map(|g| Goal { center: g.center.clone(), radius: g.radius }).collect();
-        let paths: Vec<Vec<Vec<f32>>> = batch.paths.to_vec3()?;
+        let paths: Vec<Vec<Vec<f32>>> = paths.to_vec3()?;
         for p in paths.iter().take(20) {
             let points = p.iter().map(|w| w.iter().map(|&x| x as f64).collect()).collect();
             scene.paths.push(Polyline { points, kind: PathKind::Planned });
