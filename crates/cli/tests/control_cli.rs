@@ -113,8 +113,19 @@ fn joint_train_resume_and_eval_end_to_end() {
     assert!(o.status.success(), "{}", stderr(&o));
     let run = dir.join("run");
     let run_s = run.to_str().unwrap();
-    let args =
-        ["train", "--task", "branch", "--steps", "15000", "--pretrain-updates", "5", "--eval-groups", "1"];
+    // Algorithm 1 in full: the planner updates in the joint phase too.
+    let args = [
+        "train",
+        "--task",
+        "branch",
+        "--steps",
+        "15000",
+        "--pretrain-updates",
+        "5",
+        "--eval-groups",
+        "1",
+        "--joint-planner",
+    ];
     let o = schrl(&[&args[..], &["--controller", ctl.to_str().unwrap(), "--out", run_s]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
@@ -156,6 +167,8 @@ fn joint_train_resume_and_eval_end_to_end() {
     let line = text.lines().find(|l| l.starts_with("satisfaction: ")).unwrap();
     let (mean, std) = line["satisfaction: ".len()..].split_once(" ± ").unwrap();
     assert!((0.0..=1.0).contains(&mean.parse::<f64>().unwrap()) && std.parse::<f64>().unwrap() >= 0.0);
+    let o = schrl(&["eval", "--ckpt", run_s, "--groups", "1", "--per-group", "5", "--sampled-plans"]);
+    assert!(o.status.success() && stdout(&o).contains("satisfaction: "), "{}", stderr(&o));
     let o = schrl(&[
         "train",
         "--robot",

@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# Trains and evaluates every Point task with the README's defaults (`schrl train`:
+# general controller, planner pre-training, 3 M joint steps, 5 × 100 evaluation
+# runs) over seeds, printing one line per run and a mean ± std over seeds per task
+# (README, "Joint training results").
+# Usage: scripts/joint-results.sh [OUT_DIR] [SEEDS...]   (default: runs/joint 0 1 2)
+set -euo pipefail
+out=${1:-runs/joint}
+shift || true
+seeds=("${@:-0 1 2}")
+read -r -a seeds <<<"${seeds[*]}"
+export RAYON_NUM_THREADS=1
+cargo build --release -q -p schrl-cli
+summary() { # mean ± sample std of the numbers on stdin
+  awk '{ s += $1; q += $1 * $1; n++ } END {
+    if (n == 0) { print "-"; exit }
+    m = s / n; v = n > 1 ? (q - n * m * m) / (n - 1) : 0; if (v < 0) v = 0
+    printf "%.3f ± %.3f", m, sqrt(v) }'
+}
+for task in seq cover branch loop signal; do
+  sats=() reach=() secs=()
+  for seed in "${seeds[@]}"; do
+    dir="$out/point-$task-$seed"
+    start=$(date +%s.%N)
+    result=$(./target/release/schrl train --robot point --task "$task" --seed "$seed" --out "$dir" --force)
+    end=$(date +%s.%N)
+    sat=$(grep '^satisfaction:' <<<"$result" | awk '{print $2}')
+    steps=$(grep '^steps to reach:' <<<"$result" | awk '{print $4}')
+    t=$(echo "$end - $start" | bc)
+    printf 'point %s seed %s: satisfaction %s, steps to reach %s, %.1f s\n' "$task" "$seed" "$sat" "$steps" "$t"
+    sats+=("$sat") secs+=("$t")
+    [[ "$steps" != "-" && -n "$steps" ]] && reach+=("$steps")
+  done
+  printf 'point %s over seeds %s: satisfaction %s, steps to reach %s, wall time %s s\n' "$task" "${seeds[*]}" \
+    "$(printf '%s\n' "${sats[@]}" | summary)" \
+    "$( ((${#reach[@]})) && printf '%s\n' "${reach[@]}" | summary || echo -)" \
+    "$(printf '%s\n' "${secs[@]}" | summary)"
+done
