@@ -3,7 +3,8 @@
 # general controller, planner pre-training, 3 M joint steps, 5 × 100 evaluation
 # runs) over seeds, printing one line per run and a mean ± std over seeds per task
 # (README, "Joint training results").
-# Usage: scripts/joint-results.sh [OUT_DIR] [SEEDS...]   (default: runs/joint 0 1 2)
+# Usage: [TASKS="seq cover"] scripts/joint-results.sh [OUT_DIR] [SEEDS...]
+# (defaults: all five tasks, runs/joint, seeds 0 1 2)
 set -euo pipefail
 out=${1:-runs/joint}
 shift || true
@@ -17,7 +18,8 @@ summary() { # mean ± sample std of the numbers on stdin
     m = s / n; v = n > 1 ? (q - n * m * m) / (n - 1) : 0; if (v < 0) v = 0
     printf "%.3f ± %.3f", m, sqrt(v) }'
 }
-for task in seq cover branch loop signal; do
+read -r -a tasks <<<"${TASKS:-seq cover branch loop signal}"
+for task in "${tasks[@]}"; do
   sats=() reach=() secs=()
   for seed in "${seeds[@]}"; do
     dir="$out/point-$task-$seed"

@@ -320,6 +320,18 @@ impl PlanTrainer {
         self.lagrangian.lambda = lambda;
     }
 
+    /// Fraction of the mean paths (the deployed plans, no sampling noise) from `n`
+    /// validation starts that satisfy the spec (hard ρ > 0). The starts come from their
+    /// own generator (the same `n` starts on every call), so checking does not shift
+    /// the training samples.
+    pub fn mean_satisfaction(&self, n: usize) -> Result<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.cfg.seed ^ 0x7A11_DA7E);
+        let g0 = self.task.sample_starts(&mut rng, n)?;
+        let paths = self.planner.mean_path(&g0, self.task.steps)?;
+        let hard = self.hard_robustness(&paths)?;
+        Ok(hard.iter().filter(|r| **r > 0.0).count() as f64 / n as f64)
+    }
+
     /// Fraction of `n` freshly sampled paths that satisfy the spec (hard ρ > 0).
     pub fn satisfaction(&mut self, n: usize) -> Result<f64> {
         let g0 = self.task.sample_starts(&mut self.rng, n)?;

@@ -160,3 +160,21 @@ fn checkpoint_round_trip_gives_the_same_paths() {
     let err = schrl::checkpoint::load(&dir).err().unwrap().to_string();
     assert!(err.contains("planner.json"), "{err}");
 }
+
+/// Pre-training's stopping check once drew its starts from the training generator, so
+/// checking changed which paths the planner trained on (Point Branch then failed where
+/// `schrl plan train` succeeded). The check must leave training untouched.
+#[test]
+fn mean_path_check_does_not_shift_training() {
+    let cfg = CpgConfig { batch: 8, ..CpgConfig::default() };
+    let mut plain = PlanTrainer::new(Task::point(TaskKind::Branch), cfg).unwrap();
+    let mut checked = PlanTrainer::new(Task::point(TaskKind::Branch), cfg).unwrap();
+    for _ in 0..3 {
+        let a = plain.update().unwrap();
+        let fraction = checked.mean_satisfaction(16).unwrap();
+        assert!((0.0..=1.0).contains(&fraction));
+        assert_eq!(checked.mean_satisfaction(16).unwrap(), fraction, "same validation starts each call");
+        let b = checked.update().unwrap();
+        assert_eq!(a, b);
+    }
+}
