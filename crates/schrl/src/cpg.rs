@@ -301,7 +301,7 @@ impl PlanTrainer {
         if self.cfg.method == Method::Cpg {
             self.lagrangian.update(hard.iter().sum::<f64>() / b as f64);
         }
-        let satisfaction = hard.iter().filter(|r| **r > 0.0).count() as f64 / b as f64;
+        let satisfaction = fraction_satisfied(&hard);
         Ok(UpdateStats {
             mean_rho,
             satisfaction,
@@ -329,7 +329,7 @@ impl PlanTrainer {
         let g0 = self.task.sample_starts(&mut rng, n)?;
         let paths = self.planner.mean_path(&g0, self.task.steps)?;
         let hard = self.hard_robustness(&paths)?;
-        Ok(hard.iter().filter(|r| **r > 0.0).count() as f64 / n as f64)
+        Ok(fraction_satisfied(&hard))
     }
 
     /// Fraction of `n` freshly sampled paths that satisfy the spec (hard ρ > 0).
@@ -338,6 +338,11 @@ impl PlanTrainer {
         let noise = self.task.sample_noise(&mut self.rng, n)?;
         let batch = self.planner.sample(&g0, &noise)?;
         let hard = self.hard_robustness(&batch.paths)?;
-        Ok(hard.iter().filter(|r| **r > 0.0).count() as f64 / n as f64)
+        Ok(fraction_satisfied(&hard))
     }
+}
+
+/// Fraction of hard robustness values above 0 (paths that satisfy the spec).
+fn fraction_satisfied(hard: &[f64]) -> f64 {
+    hard.iter().filter(|r| **r > 0.0).count() as f64 / hard.len().max(1) as f64
 }
