@@ -161,9 +161,9 @@ fn checkpoint_round_trip_gives_the_same_paths() {
     assert!(err.contains("planner.json"), "{err}");
 }
 
-/// Pre-training's stopping check once drew its starts from the training generator, so
-/// checking changed which paths the planner trained on (Point Branch then failed where
-/// `schrl plan train` succeeded). The check must leave training untouched.
+/// Checking the deployed (mean) paths must not change training: an early version
+/// drew its starts from the training generator, and the same seed then trained
+/// differently depending on how often it was checked.
 #[test]
 fn mean_path_check_does_not_shift_training() {
     let cfg = CpgConfig { batch: 8, ..CpgConfig::default() };
