@@ -159,6 +159,8 @@ fn train(args: TrainArgs) -> Result<()> {
         args.out.display()
     );
     println!("updates: {done}");
+    // Sampled paths are what training sees; mean paths are what `schrl train` deploys.
+    println!("mean-path satisfaction: {}", trainer.mean_satisfaction(200)?);
     println!("satisfaction: {satisfaction}");
     Ok(())
 }
