@@ -34,3 +34,25 @@ fn unknown_robot_or_map_is_a_clear_error() {
     let o = schrl(&["sim", "render", "--robot", "drone", "--map", "walls", "--out", "x.png"]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("needs a 3-D map"));
 }
+
+/// Without the `mujoco` feature the Doggo is refused with the way to enable it; with
+/// it, the Doggo renders like the other robots.
+#[test]
+fn doggo_renders_with_mujoco_and_says_how_to_enable_it_without() {
+    let dir = std::env::temp_dir().join(format!("schrl-sim-cli-doggo-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("doggo.png");
+    let _ = std::fs::remove_file(&out);
+    let o = schrl(&["sim", "render", "--robot", "doggo", "--out", out.to_str().unwrap(), "--rollout", "200"]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    if cfg!(feature = "mujoco") {
+        assert!(o.status.success(), "{stderr}");
+        assert!(std::fs::metadata(&out).unwrap().len() > 1000);
+    } else {
+        assert!(!o.status.success());
+        assert!(
+            stderr.contains("scripts/setup-mujoco.sh") && stderr.contains("--features mujoco"),
+            "{stderr}"
+        );
+    }
+}

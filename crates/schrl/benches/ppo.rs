@@ -92,7 +92,7 @@ fn minibatch_step(c: &mut Criterion) {
 fn training_throughput(c: &mut Criterion) {
     let mut g = c.benchmark_group("ppo_train_update");
     g.sample_size(10);
-    for robot in Robot::ALL {
+    for robot in Robot::NATIVE {
         let mut cfg = ControlConfig::for_robot(robot);
         cfg.total_steps = usize::MAX / 2;
         let mut t = ControlTrainer::new(cfg).unwrap();

@@ -19,6 +19,8 @@ pub enum Outcome {
     Completed,
     /// The robot touched an obstacle.
     Collided,
+    /// The robot fell over.
+    Fell,
     /// The step limit ran out first.
     TimedOut,
 }
@@ -75,6 +77,10 @@ impl WaypointDispatcher {
         if step.collided {
             self.outcome = Some(Outcome::Collided);
             return Dispatch::Done(Outcome::Collided);
+        }
+        if step.fell {
+            self.outcome = Some(Outcome::Fell);
+            return Dispatch::Done(Outcome::Fell);
         }
         if self.steps >= self.limit || step.truncated {
             self.outcome = Some(Outcome::TimedOut);

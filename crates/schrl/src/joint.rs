@@ -346,8 +346,11 @@ pub struct TaskEval {
     pub satisfaction: Vec<f64>,
     /// Mean steps to reach of each group (over its satisfying runs).
     pub steps_to_reach: Vec<f64>,
-    /// Runs ended by collision, and by the step limit, over all groups.
+    /// Runs ended by a collision, over all groups.
     pub collisions: usize,
+    /// Runs ended by a fall (legged robots), over all groups.
+    #[serde(default)]
+    pub falls: usize,
     /// Runs that timed out.
     pub timeouts: usize,
     /// A few runs, for pictures.
@@ -395,6 +398,7 @@ pub fn evaluate_task(
         satisfaction: vec![],
         steps_to_reach: vec![],
         collisions: 0,
+        falls: 0,
         timeouts: 0,
         examples: vec![],
     };
@@ -445,6 +449,7 @@ pub fn evaluate_task(
             };
             match outcome {
                 Outcome::Collided => eval.collisions += 1,
+                Outcome::Fell => eval.falls += 1,
                 Outcome::TimedOut => eval.timeouts += 1,
                 Outcome::Completed => {}
             }

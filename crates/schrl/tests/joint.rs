@@ -9,7 +9,7 @@ use schrl::tasks::{Task, TaskKind};
 use sim::{Robot, Step};
 
 fn step(reached: bool, collided: bool) -> Step {
-    Step { reward: 0.0, reached, collided, truncated: false }
+    Step { reward: 0.0, reached, collided, truncated: false, fell: false }
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! Environment steps per second on one core, single and vectorised (N = 64).
 //!
-//! Run: `cargo bench -p schrl-sim --bench env_steps` (figures in BENCHMARKS.md).
+//! Run: `cargo bench -p schrl-sim --bench env_steps` (figures in BENCHMARKS.md); with
+//! `--features mujoco` the single-environment group includes the Doggo.
 //! Actions change every 20 steps and goals are re-drawn as they are reached, so the
 //! robots cross the map and meet walls as they would in training.
 
@@ -27,7 +28,7 @@ fn actions(dim: usize, n: usize) -> Vec<f64> {
 fn single(c: &mut Criterion) {
     let mut g = c.benchmark_group("env_single");
     g.throughput(Throughput::Elements(STEPS as u64));
-    for robot in Robot::ALL {
+    for robot in Robot::ALL.into_iter().filter(|r| r.is_available()) {
         let mut env = make_env(robot, robot.default_map()).unwrap();
         let dim = env.action_space().dim();
         let acts = actions(dim, 1);
@@ -38,6 +39,9 @@ fn single(c: &mut Criterion) {
                 for t in 0..STEPS {
                     let a = &acts[(t / 20) * dim..(t / 20 + 1) * dim];
                     let s = env.step_into(a, &mut obs).unwrap();
+                    if s.fell {
+                        env.reset_into(t as u64, None, &mut obs).unwrap();
+                    }
                     if s.reached {
                         let goal = env.sample_goal();
                         env.set_goal(&goal).unwrap();
@@ -59,7 +63,7 @@ fn vectorised(c: &mut Criterion) {
     let n = 64;
     let mut g = c.benchmark_group("env_vec64");
     g.throughput(Throughput::Elements((STEPS * n) as u64));
-    for robot in Robot::ALL {
+    for robot in Robot::NATIVE {
         let mut v = VecEnv::new(robot, robot.default_map(), n, 3).unwrap();
         let dim = v.act_dim();
         let acts = actions(dim, n);

@@ -61,6 +61,15 @@ pub struct Step {
     pub collided: bool,
     /// The episode hit its step limit.
     pub truncated: bool,
+    /// The robot fell over (legged robots only; torso too low or upside down).
+    pub fell: bool,
+}
+
+impl Step {
+    /// The episode ended in failure on this step: a collision or a fall.
+    pub fn terminated(&self) -> bool {
+        self.collided || self.fell
+    }
 }
 
 /// Invalid input to an environment. The environment's state is unchanged.
@@ -117,8 +126,25 @@ pub enum EnvError {
         got: usize,
     },
     /// An unknown robot name.
-    #[error("unknown robot '{0}': expected one of point, car, drone (doggo needs the `mujoco` feature)")]
+    #[error("unknown robot '{0}': expected one of point, car, drone, doggo")]
     UnknownRobot(String),
+    /// The Doggo asked for in a build without MuJoCo.
+    #[error(
+        "the {robot} runs on MuJoCo, which this build does not include: run `bash scripts/setup-mujoco.sh`, \
+         then build with `--features mujoco` (README, section Doggo)"
+    )]
+    MujocoDisabled {
+        /// Robot name.
+        robot: &'static str,
+    },
+    /// MuJoCo could not load or run a model.
+    #[error("{robot}: MuJoCo: {reason}")]
+    Mujoco {
+        /// Robot name.
+        robot: &'static str,
+        /// What went wrong.
+        reason: String,
+    },
     /// An unknown map name.
     #[error("unknown map '{0}': expected one of walls, empty, duck, floor")]
     UnknownMap(String),
@@ -236,6 +262,10 @@ pub trait Dynamics: Send + Clone + serde::Serialize + serde::de::DeserializeOwne
     fn yaw(&self) -> f64;
     /// Writes the observation for `goal`.
     fn observe(&self, goal: &[f64], obs: &mut [f64]);
+    /// `true` once the robot has fallen over (robots that cannot fall: never).
+    fn fallen(&self) -> bool {
+        false
+    }
 }
 
 /// A robot with goal, reward and episode bookkeeping: the [`Env`] for every robot.
@@ -400,7 +430,8 @@ impl<D: Dynamics> Env for GoalEnv<D> {
             reward += REACH_BONUS;
         }
         self.robot.observe(&self.goal, obs);
-        Ok(Step { reward, reached, collided, truncated: self.steps >= self.max_steps })
+        let fell = self.robot.fallen();
+        Ok(Step { reward, reached, collided, truncated: self.steps >= self.max_steps, fell })
     }
 
     fn set_goal(&mut self, goal: &[f64]) -> Result<(), EnvError> {

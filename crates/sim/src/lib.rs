@@ -10,6 +10,10 @@
 //! * [`contact`] — keeping robots out of obstacles.
 //! * [`vec_env`] — N environments stepped together, deterministic under a seed.
 //! * [`render`] — pictures of maps, robots, goals, waypoints and trajectories.
+//! * `mujoco` (cargo feature `mujoco`) — the Doggo quadruped on MuJoCo 3.17.0, and a
+//!   MuJoCo twin of the Point for checking the native dynamics. Without the feature,
+//!   [`make_env`] answers [`Robot::Doggo`] with [`EnvError::MujocoDisabled`], which
+//!   says how to enable it.
 //!
 //! ```
 //! use sim::{make_env, Env, Map, Robot};
@@ -28,6 +32,8 @@
 pub mod contact;
 pub mod env;
 pub mod map;
+#[cfg(feature = "mujoco")]
+pub mod mujoco;
 pub mod render;
 pub mod robots;
 pub mod rotation;
@@ -41,7 +47,7 @@ pub use robots::drone::Drone;
 pub use robots::point::Point;
 pub use vec_env::VecEnv;
 
-/// The robots simulated natively.
+/// The robots of the paper.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Robot {
     /// Safety Gym's Point.
@@ -50,11 +56,21 @@ pub enum Robot {
     Car,
     /// The quadrotor.
     Drone,
+    /// The quadruped, on MuJoCo (cargo feature `mujoco`).
+    Doggo,
 }
 
 impl Robot {
-    /// All of them.
-    pub const ALL: [Robot; 3] = [Robot::Point, Robot::Car, Robot::Drone];
+    /// The robots simulated natively, available in every build.
+    pub const NATIVE: [Robot; 3] = [Robot::Point, Robot::Car, Robot::Drone];
+
+    /// Every robot, including those this build may lack (see [`Robot::is_available`]).
+    pub const ALL: [Robot; 4] = [Robot::Point, Robot::Car, Robot::Drone, Robot::Doggo];
+
+    /// `true` if this build can simulate the robot (the Doggo needs the `mujoco` feature).
+    pub fn is_available(self) -> bool {
+        self != Robot::Doggo || cfg!(feature = "mujoco")
+    }
 
     /// Its name.
     pub fn name(self) -> &'static str {
@@ -62,6 +78,7 @@ impl Robot {
             Robot::Point => "point",
             Robot::Car => "car",
             Robot::Drone => "drone",
+            Robot::Doggo => "doggo",
         }
     }
 
@@ -82,6 +99,7 @@ impl std::str::FromStr for Robot {
             "point" => Ok(Robot::Point),
             "car" => Ok(Robot::Car),
             "drone" => Ok(Robot::Drone),
+            "doggo" => Ok(Robot::Doggo),
             other => Err(EnvError::UnknownRobot(other.to_string())),
         }
     }
@@ -99,5 +117,12 @@ pub fn make_env(robot: Robot, map: Map) -> Result<Box<dyn Env>, EnvError> {
         Robot::Point => Box::new(GoalEnv::new(Point::default(), map)?),
         Robot::Car => Box::new(GoalEnv::new(Car::default(), map)?),
         Robot::Drone => Box::new(GoalEnv::new(Drone::default(), map)?),
+        #[cfg(feature = "mujoco")]
+        Robot::Doggo => {
+            let dog = mujoco::Doggo::new(&map)?;
+            Box::new(GoalEnv::new(dog, map)?)
+        }
+        #[cfg(not(feature = "mujoco"))]
+        Robot::Doggo => return Err(EnvError::MujocoDisabled { robot: "doggo" }),
     })
 }

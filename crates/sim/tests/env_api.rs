@@ -156,7 +156,7 @@ fn duck_world_distance_is_the_nearer_of_floor_and_duck_everywhere() {
 
 #[test]
 fn saved_state_restores_bit_for_bit() {
-    for robot in Robot::ALL {
+    for robot in Robot::NATIVE {
         let mut env = make_env(robot, robot.default_map()).unwrap();
         env.reset(7, None).unwrap();
         let act = vec![0.3; env.action_space().dim()];
@@ -203,4 +203,14 @@ fn floor_map_is_open_space_for_the_drone() {
     let mut env = make_env(Robot::Drone, map).unwrap();
     env.reset(1, Some(&[0.0, 0.0, 1.0])).unwrap();
     assert!(make_env(Robot::Point, Map::by_name("floor").unwrap()).is_err());
+}
+
+#[cfg(not(feature = "mujoco"))]
+#[test]
+fn doggo_without_the_mujoco_feature_says_how_to_enable_it() {
+    let robot: Robot = "doggo".parse().unwrap();
+    assert!(!robot.is_available());
+    let err = make_env(robot, Map::by_name("walls").unwrap()).err().unwrap();
+    let msg = err.to_string();
+    assert!(msg.contains("scripts/setup-mujoco.sh") && msg.contains("--features mujoco"), "{msg}");
 }

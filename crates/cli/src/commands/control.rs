@@ -23,7 +23,7 @@ pub enum Command {
 /// Arguments of `schrl control train`.
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
-    /// Robot: point, car or drone.
+    /// Robot: point, car, drone, or doggo (needs the `mujoco` feature).
     #[arg(long)]
     robot: Option<Robot>,
     /// Map whose free space goals are drawn from (default: empty for ground robots,
@@ -239,7 +239,7 @@ fn draw_episodes(
             let (o, s) = env.step(&action)?;
             obs = o;
             points.push(env.position().to_vec());
-            if s.reached || s.collided || s.truncated {
+            if s.reached || s.terminated() || s.truncated {
                 break;
             }
         }

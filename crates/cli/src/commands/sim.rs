@@ -18,7 +18,7 @@ pub enum Command {
 /// Arguments of `schrl sim render`.
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
-    /// Robot: point, car or drone.
+    /// Robot: point, car, drone, or doggo (needs the `mujoco` feature).
     #[arg(long, value_parser = parse_robot)]
     robot: Robot,
     /// Map: walls, empty or duck (default: walls for ground robots, duck for the drone).

@@ -19,7 +19,7 @@ use stl::Semantics;
 /// Arguments of `schrl train`.
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
-    /// Robot: point, car or drone.
+    /// Robot: point, car, drone, or doggo (needs the `mujoco` feature).
     #[arg(long, default_value = "point")]
     robot: Robot,
     /// Task: seq, cover, branch, loop, signal, or a task file (TOML).
@@ -303,7 +303,7 @@ fn print_eval(e: &TaskEval) {
         let (tm, ts) = mean_std(&e.steps_to_reach);
         println!("steps to reach: {tm:.1} ± {ts:.1}");
     }
-    println!("failures: {} collisions, {} time-outs", e.collisions, e.timeouts);
+    println!("failures: {} collisions, {} falls, {} time-outs", e.collisions, e.falls, e.timeouts);
 }
 
 fn draw(task: &Task, e: &TaskEval, out: &Path, force: bool) -> Result<()> {

@@ -3,7 +3,7 @@
 //!
 //! Each environment starts at a random free position with a random free goal
 //! (uniform in the map's region, clear of obstacles). On reaching the goal it gets a
-//! new one and carries on; a collision (terminal) or the step limit (truncated,
+//! new one and carries on; a collision or a fall (terminal) or the step limit (truncated,
 //! bootstrapped with the critic) resets it. The general controller learns in the
 //! open (`empty` map for ground robots, `floor` for the Drone): it sees only the goal
 //! direction, so obstacles are the planner's business (paper §3.3).
@@ -67,6 +67,8 @@ pub fn default_steps(robot: Robot) -> usize {
         Robot::Point => 1_000_000,
         Robot::Car => 2_000_000,
         Robot::Drone => 400_000,
+        // Not tuned here: the paper's Doggo runs use 1e8 steps in all (Fig. 3).
+        Robot::Doggo => 10_000_000,
     }
 }
 
@@ -294,13 +296,13 @@ impl ControlTrainer {
                     env.set_goal(&goal)?;
                     env.observe(o);
                 }
-                let end = s.collided || s.truncated;
+                let end = s.terminated() || s.truncated;
                 ends[i] = end;
                 if end {
                     if !s.reached {
                         self.recent.push_goal(false);
                     }
-                    if s.truncated && !s.collided {
+                    if s.truncated && !s.terminated() {
                         truncated_obs.push((i, o.to_vec()));
                     }
                     episodes += 1;
@@ -442,7 +444,7 @@ pub struct EvalResult {
     pub success_rate: f64,
     /// Mean environment steps to reach the goal, over the successful episodes.
     pub mean_steps_to_reach: Option<f64>,
-    /// Episodes ended by a collision.
+    /// Episodes ended by a collision or a fall.
     pub collisions: usize,
     /// Episodes that ran out of steps.
     pub timeouts: usize,
@@ -488,7 +490,7 @@ pub fn evaluate(
                     successes += 1;
                     steps_sum += t;
                     active[i] = false;
-                } else if s.collided {
+                } else if s.terminated() {
                     collisions += 1;
                     active[i] = false;
                 } else if s.truncated {
