@@ -38,6 +38,15 @@ fn dispatcher_advances_finishes_times_out_and_stops_on_collision() {
 }
 
 #[test]
+fn dispatcher_stops_when_the_robot_falls() {
+    let mut d = WaypointDispatcher::new(vec![0.0, 0.0], vec![vec![1.0, 0.0]], 10);
+    let fell = Step { fell: true, ..step(false, false) };
+    assert!(fell.terminated());
+    assert_eq!(d.after_step(&fell, &[0.2, 0.0]), Dispatch::Done(Outcome::Fell));
+    assert_eq!(d.outcome(), Some(Outcome::Fell));
+}
+
+#[test]
 fn satisfaction_is_judged_on_the_executed_path() {
     let task = Task::point(TaskKind::Seq);
     let spec = task.spec();
