@@ -50,3 +50,22 @@ fn bad_arguments_are_clear_errors() {
     let o = schrl(&["plan", "sample", "--ckpt", "/nonexistent/ckpt"]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("planner.json"));
 }
+
+#[test]
+fn time_compares_the_network_with_the_gradient_planner() {
+    let dir = std::env::temp_dir().join(format!("schrl-plan-time-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = dir.to_str().unwrap();
+    let o = schrl(&["plan", "train", "--task", "branch", "--updates", "20", "--out", out]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = schrl(&["plan", "time", "--ckpt", out, "--n", "5"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("5/5 satisfy (at most"), "the gradient planner solves Branch: {text}");
+    // A deployed plan is microseconds; the gradient planner's search is not.
+    let (net, grad) =
+        (last_value(&o, "network seconds per plan:"), last_value(&o, "gradient seconds per plan:"));
+    assert!(net > 0.0 && net < grad, "network {net} s, gradient {grad} s");
+    let o = schrl(&["plan", "time", "--ckpt", out, "--n", "0"]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--n"));
+}

@@ -4,6 +4,8 @@
 //! * [`tasks`] — the five task types for Point with their specs and goals.
 //! * [`planner`] — the GRU-ODE Gaussian planner (Eq. 3).
 //! * [`cpg`] — the constrained policy gradient with a Lagrange multiplier (Eq. 4).
+//! * [`deployed`] — a trained planner's mean path in plain Rust, no autodiff (deployment).
+//! * [`gradient_planner`] — the gradient planner baseline (waypoints optimised directly).
 //! * [`checkpoint`] — saving and loading trained planners.
 //! * [`control`] — the goal-conditioned PPO controller.
 //! * [`execute`] — driving the robot through a plan's waypoints; satisfaction of what it did.
@@ -14,7 +16,9 @@
 pub mod checkpoint;
 pub mod control;
 pub mod cpg;
+pub mod deployed;
 pub mod execute;
+pub mod gradient_planner;
 pub mod joint;
 pub mod planner;
 pub mod tasks;

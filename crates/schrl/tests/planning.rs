@@ -178,3 +178,55 @@ fn mean_path_check_does_not_shift_training() {
         assert_eq!(a, b);
     }
 }
+
+/// The deployed planner (plain Rust, no autodiff) plans the paths candle plans: for
+/// a fresh planner and after training has moved its weights.
+#[test]
+fn deployed_plans_match_candle_mean_paths() {
+    use schrl::deployed::DeployedPlanner;
+    let mut trainer =
+        PlanTrainer::new(Task::point(TaskKind::Seq), CpgConfig { batch: 8, ..Default::default() }).unwrap();
+    let check = |trainer: &PlanTrainer| {
+        let cfg = *trainer.planner().config();
+        let deployed = DeployedPlanner::from_varmap(trainer.varmap(), &cfg).unwrap();
+        let starts = Tensor::new(&[[1.5f32, -1.5], [1.2, -1.9], [-2.0, 2.5]], &Device::Cpu).unwrap();
+        let steps = trainer.task().steps;
+        let want = trainer.planner().mean_path(&starts, steps).unwrap().to_vec3::<f32>().unwrap();
+        let got = deployed.mean_paths_tensor(&starts, steps).unwrap().to_vec3::<f64>().unwrap();
+        let mut worst = 0.0f64;
+        for (a, b) in want.iter().flatten().flatten().zip(got.iter().flatten().flatten()) {
+            worst = worst.max((*a as f64 - b).abs());
+        }
+        assert!(worst < 1e-4, "deployed and candle paths differ by {worst}");
+        // The single-path call agrees with the batch call.
+        assert_eq!(deployed.mean_path(&[1.5, -1.5], steps), got[0]);
+    };
+    check(&trainer);
+    for _ in 0..30 {
+        trainer.update().unwrap();
+    }
+    check(&trainer);
+}
+
+/// The gradient planner (App. J) finds a satisfying Seq plan from a given start,
+/// keeps the start, and is deterministic under its generator.
+#[test]
+fn gradient_planner_satisfies_seq_and_keeps_the_start() {
+    use rand::SeedableRng;
+    use schrl::gradient_planner::{GradientPlannerConfig, plan};
+    let task = Task::point(TaskKind::Seq);
+    let spec = task.spec();
+    let cfg = GradientPlannerConfig::default();
+    let run =
+        |seed| plan(&task, &spec, &[1.5, -1.5], &cfg, &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+    let p = run(3).unwrap();
+    assert!(p.satisfied(), "robustness {} after {} attempts", p.robustness, p.attempts);
+    assert_eq!(&p.path[..2], &[1.5, -1.5]);
+    assert_eq!(p.path.len(), (task.steps + 1) * 2);
+    assert!(spec.robustness(&p.path, &stl::Semantics::hard()).unwrap() > 0.0);
+    assert_eq!(run(3).unwrap(), p);
+    // One attempt of one step cannot satisfy it: the best failed path comes back.
+    let short = GradientPlannerConfig { iterations: 1, restarts: 1, ..cfg };
+    let q = plan(&task, &spec, &[1.5, -1.5], &short, &mut rand_chacha::ChaCha8Rng::seed_from_u64(3)).unwrap();
+    assert!(!q.satisfied() && q.attempts == 1 && q.iterations == 1);
+}

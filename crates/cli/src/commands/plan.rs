@@ -1,4 +1,5 @@
-//! `schrl plan`: train the GRU-ODE planner on a task and sample from it.
+//! `schrl plan`: train the GRU-ODE planner on a task, sample from it, and time
+//! its plans against the gradient planner.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -9,6 +10,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use schrl::checkpoint::{self, PlannerMeta};
 use schrl::cpg::{CpgConfig, Method, PlanTrainer};
+use schrl::deployed::{DeployedPlanner, PlanScratch};
+use schrl::gradient_planner::{self, GradientPlannerConfig};
+use schrl::joint::mean_std;
 use schrl::tasks::{Task, TaskKind};
 use sim::render::{Goal, PathKind, Polyline, Scene};
 use stl::Semantics;
@@ -20,6 +24,23 @@ pub enum Command {
     Train(TrainArgs),
     /// Sample paths from a trained planner and report how many satisfy the spec.
     Sample(SampleArgs),
+    /// Time per plan: the trained network (deployed, no autodiff) against the
+    /// gradient planner, from the same starts (paper Table 5).
+    Time(TimeArgs),
+}
+
+/// Arguments of `schrl plan time`.
+#[derive(clap::Args, Debug)]
+pub struct TimeArgs {
+    /// Checkpoint directory of a trained planner (`schrl plan train --out`).
+    #[arg(long)]
+    ckpt: PathBuf,
+    /// Plans to time (the paper: 100).
+    #[arg(long, default_value_t = 100)]
+    n: usize,
+    /// Seed of the starts and of the gradient planner's initialisations.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
 }
 
 /// Arguments of `schrl plan train`.
@@ -90,6 +111,7 @@ pub fn run(cmd: Command) -> Result<()> {
     match cmd {
         Command::Train(args) => train(args),
         Command::Sample(args) => sample(args),
+        Command::Time(args) => time(args),
     }
 }
 
@@ -191,5 +213,58 @@ fn sample(args: SampleArgs) -> Result<()> {
         println!("wrote {}", out.display());
     }
     println!("satisfaction: {}", satisfied as f64 / args.n.max(1) as f64);
+    Ok(())
+}
+
+fn time(args: TimeArgs) -> Result<()> {
+    if args.n == 0 {
+        bail!("--n must be at least 1");
+    }
+    let loaded = checkpoint::load(&args.ckpt)?;
+    let task = &loaded.task;
+    let spec = task.spec();
+    let deployed = DeployedPlanner::from_varmap(&loaded.varmap, loaded.planner.config())?;
+    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
+    let starts: Vec<Vec<f64>> =
+        task.sample_starts(&mut rng, args.n)?.to_dtype(candle_core::DType::F64)?.to_vec2()?;
+    let hard = Semantics::hard();
+    let dim = task.map.dim();
+
+    // The network: each plan timed alone (mean of n, as Table 5), after one warm-up.
+    let (mut scratch, mut path) = (PlanScratch::default(), Vec::new());
+    deployed.mean_path_into(&starts[0], task.steps, &mut scratch, &mut path);
+    let (mut net_us, mut net_ok) = (Vec::with_capacity(args.n), 0);
+    for s in &starts {
+        let t0 = std::time::Instant::now();
+        deployed.mean_path_into(s, task.steps, &mut scratch, &mut path);
+        net_us.push(t0.elapsed().as_secs_f64() * 1e6);
+        net_ok += (spec.robustness(&path, &hard)? > 0.0) as usize;
+    }
+
+    let bar = ProgressBar::new(args.n as u64);
+    bar.set_style(
+        ProgressStyle::with_template("gradient planner {bar:40} {pos}/{len}").expect("valid template"),
+    );
+    let cfg = GradientPlannerConfig::default();
+    let (mut grad_ms, mut grad_ok) = (Vec::with_capacity(args.n), 0);
+    for s in &starts {
+        let t0 = std::time::Instant::now();
+        let p = gradient_planner::plan(task, &spec, s, &cfg, &mut rng)?;
+        grad_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        grad_ok += p.satisfied() as usize;
+        debug_assert_eq!(p.path.len(), (task.steps + 1) * dim);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let (nm, ns) = mean_std(&net_us);
+    let (gm, gs) = mean_std(&grad_ms);
+    println!("task: {} (T = {}), {} starts", task.name, task.steps, args.n);
+    println!("network (deployed mean path): {nm:.2} ± {ns:.2} µs per plan, {net_ok}/{} satisfy", args.n);
+    println!(
+        "gradient planner: {gm:.2} ± {gs:.2} ms per plan, {grad_ok}/{} satisfy (at most {} attempts of {} steps)",
+        args.n, cfg.restarts, cfg.iterations
+    );
+    println!("network seconds per plan: {:.3e}", nm * 1e-6);
+    println!("gradient seconds per plan: {:.3e}", gm * 1e-3);
     Ok(())
 }
