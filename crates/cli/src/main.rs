@@ -25,9 +25,12 @@ enum Command {
     /// Simulated robots and maps.
     #[command(subcommand)]
     Sim(commands::sim::Command),
-    /// Spec-constrained planners: train, sample.
+    /// Spec-constrained planners: train, sample, time.
     #[command(subcommand)]
     Plan(commands::plan::Command),
+    /// Neural signed-distance predicates: fit, check.
+    #[command(subcommand)]
+    Sdf(commands::sdf::Command),
     /// Train planner and controller together on a task (Algorithm 1), then evaluate.
     Train(commands::train::TrainArgs),
     /// Evaluate a trained task: satisfaction and steps to reach over 5 groups of 100 runs.
@@ -46,6 +49,7 @@ fn main() -> ExitCode {
         Command::Robustness(args) => commands::robustness::run(args),
         Command::Sim(cmd) => commands::sim::run(cmd),
         Command::Plan(cmd) => commands::plan::run(cmd),
+        Command::Sdf(cmd) => commands::sdf::run(cmd),
         Command::Control(cmd) => commands::control::run(cmd),
         Command::Task(cmd) => commands::task::run(cmd),
         Command::Train(args) => commands::train::train(args),

@@ -6,6 +6,7 @@
 //! * [`cpg`] — the constrained policy gradient with a Lagrange multiplier (Eq. 4).
 //! * [`deployed`] — a trained planner's mean path in plain Rust, no autodiff (deployment).
 //! * [`gradient_planner`] — the gradient planner baseline (waypoints optimised directly).
+//! * [`neural_sdf`] — MLP signed distances fitted to a map, as STL predicates.
 //! * [`checkpoint`] — saving and loading trained planners.
 //! * [`control`] — the goal-conditioned PPO controller.
 //! * [`execute`] — driving the robot through a plan's waypoints; satisfaction of what it did.
@@ -20,5 +21,6 @@ pub mod deployed;
 pub mod execute;
 pub mod gradient_planner;
 pub mod joint;
+pub mod neural_sdf;
 pub mod planner;
 pub mod tasks;

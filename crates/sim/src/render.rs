@@ -296,6 +296,82 @@ pub fn save(scene: &Scene, out: &Path, overwrite: bool) -> Result<(), RenderErro
     write_picture(out, overwrite, image_size(scene), |root| draw(root, scene), |root| draw(root, scene))
 }
 
+/// Draws a scalar field over a ground map's region (e.g. a learned signed distance),
+/// top view at 100 px per metre: cells coloured blue where the field is positive and
+/// red where negative, darker with |value| (saturating at 2 m), black where it changes
+/// sign between neighbouring cells (its zero level set), and the map's true
+/// obstacles outlined in grey on top. Refuses to replace a file unless `overwrite`.
+pub fn save_field(
+    map: &Map,
+    field: &dyn Fn(&[f64]) -> f64,
+    out: &Path,
+    overwrite: bool,
+) -> Result<(), RenderError> {
+    let (lo, hi) = map.region();
+    if lo.len() != 2 {
+        return Err(RenderError::Write {
+            path: out.to_path_buf(),
+            message: format!("fields are drawn on ground maps only, not '{}'", map.name()),
+        });
+    }
+    let cell = 0.025;
+    let (nx, ny) = (((hi[0] - lo[0]) / cell).round() as usize, ((hi[1] - lo[1]) / cell).round() as usize);
+    let values: Vec<f64> = (0..ny)
+        .flat_map(|j| (0..nx).map(move |i| (i, j)))
+        .map(|(i, j)| field(&[lo[0] + (i as f64 + 0.5) * cell, lo[1] + (j as f64 + 0.5) * cell]))
+        .collect();
+    let size = (((hi[0] - lo[0]) * PX_PER_M) as u32, ((hi[1] - lo[1]) * PX_PER_M) as u32);
+    write_picture(
+        out,
+        overwrite,
+        size,
+        |root| draw_field(root, map, &values, (nx, ny), cell),
+        |root| draw_field(root, map, &values, (nx, ny), cell),
+    )
+}
+
+fn draw_field<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    map: &Map,
+    values: &[f64],
+    (nx, ny): (usize, usize),
+    cell: f64,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let (lo, hi) = map.region();
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart: Chart<'_, DB> =
+        ChartBuilder::on(&root).build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1]).map_err(err)?;
+    let at = |i: usize, j: usize| values[j * nx + i];
+    let cells = (0..ny).flat_map(|j| (0..nx).map(move |i| (i, j))).map(|(i, j)| {
+        let v = at(i, j);
+        let edge = (i + 1 < nx && (at(i + 1, j) > 0.0) != (v > 0.0))
+            || (j + 1 < ny && (at(i, j + 1) > 0.0) != (v > 0.0));
+        let k = (v.abs() / 2.0).min(1.0);
+        let shade = (255.0 * (1.0 - 0.75 * k)) as u8;
+        let color = if edge {
+            BLACK
+        } else if v > 0.0 {
+            RGBColor(shade, shade, 255)
+        } else {
+            RGBColor(255, shade, shade)
+        };
+        let (x, y) = (lo[0] + i as f64 * cell, lo[1] + j as f64 * cell);
+        Rectangle::new([(x, y), (x + cell, y + cell)], color.filled())
+    });
+    chart.draw_series(cells).map_err(err)?;
+    if let Map::Walls(w) = map {
+        let outlines = w.bars().iter().map(|(c, h)| {
+            Rectangle::new([(c[0] - h[0], c[1] - h[1]), (c[0] + h[0], c[1] + h[1])], WALL.stroke_width(2))
+        });
+        chart.draw_series(outlines).map_err(err)?;
+    }
+    root.present().map_err(|e| e.to_string())
+}
+
 /// One panel of a line chart: series of `(x, y)` points drawn in the palette's
 /// colours (first series orange, then blue, green, grey), y from `y_range` (or the
 /// data's range when `None`).

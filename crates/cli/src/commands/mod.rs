@@ -3,6 +3,7 @@
 pub mod control;
 pub mod plan;
 pub mod robustness;
+pub mod sdf;
 pub mod sim;
 pub mod spec_text;
 pub mod task;
