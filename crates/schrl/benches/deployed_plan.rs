@@ -1,6 +1,6 @@
 //! One deployed plan: the mean path of a trained-shape GRU-ODE planner (hidden 64)
 //! from one start, in plain Rust ([`schrl::deployed::DeployedPlanner`]) and, for
-//! comparison, through candle ([`schrl::planner::GruOdePlanner::mean_path`]).
+//! comparison, through candle ([`schrl::planner::PathPlanner::mean_path`]).
 //!
 //! Run: `cargo bench -p schrl --bench deployed_plan` (figures in BENCHMARKS.md). The
 //! weights are a seeded initialisation: the arithmetic per waypoint does not depend on

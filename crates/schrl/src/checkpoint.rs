@@ -13,7 +13,7 @@ use candle_nn::{VarBuilder, VarMap};
 use serde::{Deserialize, Serialize};
 
 use crate::cpg::PlanTrainer;
-use crate::planner::{GruOdePlanner, PlannerConfig};
+use crate::planner::{PathPlanner, PlannerConfig, PlannerKind};
 use crate::tasks::{Task, TaskKind};
 
 /// What a checkpoint records besides the weights.
@@ -41,6 +41,14 @@ pub struct PlannerMeta {
     pub bound: f64,
     /// Smallest standard deviation.
     pub min_std: f64,
+    /// The planner network: `gru-ode` (the paper's; the default of older
+    /// checkpoints), `gru` or `mlp`.
+    #[serde(default = "default_planner")]
+    pub planner: String,
+}
+
+fn default_planner() -> String {
+    PlannerKind::GruOde.name().to_string()
 }
 
 /// A checkpoint problem, naming the file.
@@ -114,7 +122,7 @@ pub fn save(
 /// A loaded planner with its task and metadata.
 pub struct LoadedPlanner {
     /// The planner.
-    pub planner: GruOdePlanner,
+    pub planner: PathPlanner,
     /// Its weights.
     pub varmap: VarMap,
     /// The task it was trained on.
@@ -145,8 +153,10 @@ pub fn load(dir: &Path) -> Result<LoadedPlanner, CheckpointError> {
     }
     let mut varmap = VarMap::new();
     let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
-    let cfg = PlannerConfig { dim: meta.dim, hidden: meta.hidden, bound: meta.bound, min_std: meta.min_std };
-    let planner = GruOdePlanner::new(cfg, vb).map_err(|e| invalid(e.to_string()))?;
+    let kind: PlannerKind = meta.planner.parse().map_err(invalid)?;
+    let cfg =
+        PlannerConfig { dim: meta.dim, hidden: meta.hidden, bound: meta.bound, min_std: meta.min_std, kind };
+    let planner = PathPlanner::new(cfg, vb).map_err(|e| invalid(e.to_string()))?;
     let weights = dir.join(WEIGHTS);
     varmap
         .load(&weights)

@@ -24,7 +24,7 @@ use rand_chacha::ChaCha8Rng;
 use stl::Semantics;
 use stl::tensor::TensorSpec;
 
-use crate::planner::{GruOdePlanner, PlanBatch, PlannerConfig};
+use crate::planner::{PathPlanner, PlanBatch, PlannerConfig, PlannerKind};
 use crate::tasks::{self, Task};
 
 /// The dual variable of the spec constraint `ρ ≥ ε`.
@@ -120,6 +120,8 @@ pub struct CpgConfig {
     pub method: Method,
     /// Seed of parameters, starts and noise.
     pub seed: u64,
+    /// The planner network (the paper's GRU-ODE, or a Fig. 6 ablation).
+    pub planner: PlannerKind,
 }
 
 impl Default for CpgConfig {
@@ -135,6 +137,7 @@ impl Default for CpgConfig {
             semantics: Semantics::soft(10.0),
             method: Method::Cpg,
             seed: 0,
+            planner: PlannerKind::GruOde,
         }
     }
 }
@@ -152,10 +155,10 @@ pub struct UpdateStats {
     pub loss: f64,
 }
 
-/// Trains a [`GruOdePlanner`] on a task with the constrained policy gradient.
+/// Trains a [`PathPlanner`] on a task with the constrained policy gradient.
 pub struct PlanTrainer {
     varmap: VarMap,
-    planner: GruOdePlanner,
+    planner: PathPlanner,
     opt: AdamW,
     spec: TensorSpec,
     hard: stl::Spec,
@@ -191,7 +194,10 @@ impl PlanTrainer {
     pub fn new(task: Task, cfg: CpgConfig) -> Result<Self> {
         let varmap = VarMap::new();
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
-        let planner = GruOdePlanner::new(PlannerConfig::reference(task.map.dim()), vb)?;
+        let planner = PathPlanner::new(
+            PlannerConfig { kind: cfg.planner, ..PlannerConfig::reference(task.map.dim()) },
+            vb,
+        )?;
         seeded_init(&varmap, cfg.seed)?;
         let params = ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..Default::default() };
         let opt = AdamW::new(varmap.all_vars(), params)?;
@@ -221,7 +227,7 @@ impl PlanTrainer {
     }
 
     /// The planner.
-    pub fn planner(&self) -> &GruOdePlanner {
+    pub fn planner(&self) -> &PathPlanner {
         &self.planner
     }
 

@@ -6,7 +6,7 @@
 //! small matrix–vector products written as vectorisable loops, so a whole Seq plan
 //! takes microseconds (`cargo bench -p schrl --bench deployed_plan`, BENCHMARKS.md).
 //!
-//! The arithmetic is the one of [`crate::planner::GruOdePlanner::mean_path`] in `f32`
+//! The arithmetic is the one of [`crate::planner::PathPlanner::mean_path`] in `f32`
 //! (PyTorch's GRU: gates r, z, n; `h' = (1 − z) n + z h`), with the sigmoid written as
 //! `(1 + tanh(x/2))/2` through [`fast_tanh`]; waypoints agree with candle's to within
 //! 1e-4 m (tested in `tests/planning.rs`).
@@ -15,7 +15,7 @@ use candle_core::{DType, Result, Tensor};
 use candle_nn::VarMap;
 
 use crate::control::mlp::fast_tanh;
-use crate::planner::PlannerConfig;
+use crate::planner::{PlannerConfig, PlannerKind};
 
 /// The mean-path part of a GRU-ODE planner, as plain arrays.
 #[derive(Clone, Debug, PartialEq)]
@@ -76,8 +76,11 @@ fn add_product(out: &mut [f32], wt: &[f32], x: &[f32]) {
 
 impl DeployedPlanner {
     /// The planner whose parameters are in `varmap` (names as
-    /// [`crate::planner::GruOdePlanner::new`] makes them) with shape `cfg`.
+    /// [`crate::planner::PathPlanner::new`] makes them) with shape `cfg`.
     pub fn from_varmap(varmap: &VarMap, cfg: &PlannerConfig) -> Result<Self> {
+        if cfg.kind != PlannerKind::GruOde {
+            candle_core::bail!("only GRU-ODE planners are deployed in plain Rust, not '{}'", cfg.kind.name());
+        }
         let (d, h) = (cfg.dim, cfg.hidden);
         let w_ih = weights(varmap, "gru.weight_ih_l0", &[3 * h, d])?;
         let w_hh = weights(varmap, "gru.weight_hh_l0", &[3 * h, h])?;
@@ -142,7 +145,7 @@ impl DeployedPlanner {
     }
 
     /// Mean paths of a batch of starts `[n, dim]`, as a `[n, steps + 1, dim]` tensor
-    /// (the shape [`crate::planner::GruOdePlanner::mean_path`] returns).
+    /// (the shape [`crate::planner::PathPlanner::mean_path`] returns).
     pub fn mean_paths_tensor(&self, starts: &Tensor, steps: usize) -> Result<Tensor> {
         let starts: Vec<Vec<f64>> = starts.to_dtype(DType::F64)?.to_vec2()?;
         let mut all = Vec::with_capacity(starts.len() * (steps + 1) * self.dim);

@@ -23,7 +23,7 @@ use crate::control::ppo::{RolloutBuffer, UpdateStats as PpoStats};
 use crate::control::{ControlTrainer, Controller};
 use crate::cpg::{CpgConfig, PlanTrainer};
 use crate::execute::{Dispatch, Execution, Outcome, executed_robustness, start_run};
-use crate::planner::GruOdePlanner;
+use crate::planner::PathPlanner;
 use crate::tasks::Task;
 
 /// Joint-training settings.
@@ -385,7 +385,7 @@ pub enum PlanChoice {
 /// actions.
 pub fn evaluate_task(
     task: &Task,
-    planner: &GruOdePlanner,
+    planner: &PathPlanner,
     controller: &Controller,
     (groups, per_group): (usize, usize),
     choice: PlanChoice,

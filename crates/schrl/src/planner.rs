@@ -11,10 +11,51 @@
 //!
 //! Defaults from the reference setup: hidden size 64, one layer, step bound 10,
 //! `σ_min` = 0.1.
+//!
+//! Two ablations of Fig. 6 share the Gaussian policy and differ in the mean
+//! ([`PlannerKind`]): a plain GRU that predicts the next waypoint directly,
+//! `μ_{i+1} = W h_{i+1}` (memory, no ODE step), and an MLP that sees only the current
+//! waypoint, `μ_{i+1} = g_i + bound · tanh(W tanh(U g_i))` (the ODE step, no memory).
 
 use candle_core::{D, Result, Tensor};
 use candle_nn::rnn::{GRU, GRUConfig, GRUState, RNN, gru};
 use candle_nn::{Linear, Module, VarBuilder, linear};
+
+/// Which network maps the current waypoint to the next one's Gaussian.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PlannerKind {
+    /// The paper's GRU-ODE: memory and a bounded residual step (Eq. 3).
+    #[default]
+    GruOde,
+    /// A GRU whose output is the next waypoint itself (no residual step).
+    Gru,
+    /// A one-hidden-layer tanh MLP of the current waypoint (no memory), residual step.
+    Mlp,
+}
+
+impl PlannerKind {
+    /// Its name on the command line and in checkpoints.
+    pub fn name(self) -> &'static str {
+        match self {
+            PlannerKind::GruOde => "gru-ode",
+            PlannerKind::Gru => "gru",
+            PlannerKind::Mlp => "mlp",
+        }
+    }
+}
+
+impl std::str::FromStr for PlannerKind {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "gru-ode" => Ok(PlannerKind::GruOde),
+            "gru" => Ok(PlannerKind::Gru),
+            "mlp" => Ok(PlannerKind::Mlp),
+            other => Err(format!("unknown planner '{other}': expected gru-ode, gru or mlp")),
+        }
+    }
+}
 
 /// Shape and constants of a planner.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -27,12 +68,14 @@ pub struct PlannerConfig {
     pub bound: f64,
     /// Smallest standard deviation (reference: 0.1).
     pub min_std: f64,
+    /// The network (the paper's GRU-ODE, or an ablation).
+    pub kind: PlannerKind,
 }
 
 impl PlannerConfig {
     /// The reference setup's planner for `dim`-dimensional plans.
     pub fn reference(dim: usize) -> Self {
-        Self { dim, hidden: 64, bound: 10.0, min_std: 0.1 }
+        Self { dim, hidden: 64, bound: 10.0, min_std: 0.1, kind: PlannerKind::GruOde }
     }
 }
 
@@ -45,21 +88,38 @@ pub struct PlanBatch {
     pub log_prob: Tensor,
 }
 
-/// The GRU-ODE Gaussian planner.
-pub struct GruOdePlanner {
-    cell: GRU,
+/// The recurrent or feed-forward part of a planner.
+enum Core {
+    /// A GRU cell (GRU-ODE and plain GRU).
+    Gru(GRU),
+    /// The MLP's hidden layer.
+    Mlp(Linear),
+}
+
+/// A Gaussian path planner: the GRU-ODE, or one of its ablations.
+pub struct PathPlanner {
+    core: Core,
     mean_head: Linear,
     std_head: Linear,
     cfg: PlannerConfig,
 }
 
+/// The hidden state carried along a path (empty for the MLP).
+type State = Option<GRUState>;
+
 const HALF_LN_TAU: f64 = 0.918_938_533_204_672_8; // ½ ln 2π
 
-impl GruOdePlanner {
+impl PathPlanner {
     /// A planner with parameters in `vb`.
     pub fn new(cfg: PlannerConfig, vb: VarBuilder) -> Result<Self> {
+        let core = match cfg.kind {
+            PlannerKind::GruOde | PlannerKind::Gru => {
+                Core::Gru(gru(cfg.dim, cfg.hidden, GRUConfig::default(), vb.pp("gru"))?)
+            }
+            PlannerKind::Mlp => Core::Mlp(linear(cfg.dim, cfg.hidden, vb.pp("mlp"))?),
+        };
         Ok(Self {
-            cell: gru(cfg.dim, cfg.hidden, GRUConfig::default(), vb.pp("gru"))?,
+            core,
             mean_head: linear(cfg.hidden, cfg.dim, vb.pp("mean"))?,
             std_head: linear(cfg.hidden, cfg.dim, vb.pp("std"))?,
             cfg,
@@ -73,16 +133,30 @@ impl GruOdePlanner {
 
     /// One step: from waypoint `g` `[batch, dim]` and the hidden state, the next
     /// waypoint's mean and standard deviation.
-    fn step(&self, g: &Tensor, state: &GRUState) -> Result<(Tensor, Tensor, GRUState)> {
-        let state = self.cell.step(g, state)?;
-        let h = state.h();
-        let mean = (g + (self.mean_head.forward(h)?.tanh()? * self.cfg.bound)?)?;
-        let std = (self.std_head.forward(h)?.abs()? + self.cfg.min_std)?;
+    fn step(&self, g: &Tensor, state: &State) -> Result<(Tensor, Tensor, State)> {
+        let (h, state) = match (&self.core, state) {
+            (Core::Gru(cell), Some(s)) => {
+                let s = cell.step(g, s)?;
+                (s.h().clone(), Some(s))
+            }
+            (Core::Mlp(layer), _) => (layer.forward(g)?.tanh()?, None),
+            (Core::Gru(_), None) => candle_core::bail!("a GRU planner needs a hidden state"),
+        };
+        let mean = match self.cfg.kind {
+            PlannerKind::Gru => self.mean_head.forward(&h)?,
+            PlannerKind::GruOde | PlannerKind::Mlp => {
+                (g + (self.mean_head.forward(&h)?.tanh()? * self.cfg.bound)?)?
+            }
+        };
+        let std = (self.std_head.forward(&h)?.abs()? + self.cfg.min_std)?;
         Ok((mean, std, state))
     }
 
-    fn zero_state(&self, g0: &Tensor) -> Result<GRUState> {
-        self.cell.zero_state(g0.dim(0)?)
+    fn zero_state(&self, g0: &Tensor) -> Result<State> {
+        match &self.core {
+            Core::Gru(cell) => Ok(Some(cell.zero_state(g0.dim(0)?)?)),
+            Core::Mlp(_) => Ok(None),
+        }
     }
 
     /// Samples one path per start in `g0` (`[batch, dim]`) with standard-normal

@@ -3,13 +3,17 @@
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use schrl::cpg::{CpgConfig, Lagrangian, Method, PlanTrainer, seeded_init};
-use schrl::planner::{GruOdePlanner, PlannerConfig};
+use schrl::planner::{PathPlanner, PlannerConfig};
 use schrl::tasks::{Task, TaskKind};
 
-fn tiny_planner(seed: u64) -> GruOdePlanner {
+fn tiny_planner(seed: u64) -> PathPlanner {
     let varmap = VarMap::new();
     let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
-    let p = GruOdePlanner::new(PlannerConfig { dim: 2, hidden: 4, bound: 2.0, min_std: 0.1 }, vb).unwrap();
+    let p = PathPlanner::new(
+        PlannerConfig { dim: 2, hidden: 4, bound: 2.0, min_std: 0.1, kind: Default::default() },
+        vb,
+    )
+    .unwrap();
     seeded_init(&varmap, seed).unwrap();
     p
 }
@@ -143,6 +147,7 @@ fn checkpoint_round_trip_gives_the_same_paths() {
         hidden: 64,
         bound: 10.0,
         min_std: 0.1,
+        planner: "gru-ode".into(),
     };
     schrl::checkpoint::save(&dir, &t, &meta, false).unwrap();
     assert!(matches!(
@@ -229,4 +234,50 @@ fn gradient_planner_satisfies_seq_and_keeps_the_start() {
     let short = GradientPlannerConfig { iterations: 1, restarts: 1, ..cfg };
     let q = plan(&task, &spec, &[1.5, -1.5], &short, &mut rand_chacha::ChaCha8Rng::seed_from_u64(3)).unwrap();
     assert!(!q.satisfied() && q.attempts == 1 && q.iterations == 1);
+}
+
+/// The Fig. 6 ablation planners (plain GRU, MLP) sample, score and train like the
+/// GRU-ODE; the MLP has no memory, so its step depends on the current waypoint only.
+#[test]
+fn ablation_planners_sample_score_and_train() {
+    use schrl::planner::PlannerKind;
+    for kind in [PlannerKind::Gru, PlannerKind::Mlp] {
+        let cfg = CpgConfig { batch: 16, planner: kind, ..Default::default() };
+        let mut t = PlanTrainer::new(Task::point(TaskKind::Seq), cfg).unwrap();
+        let batch = t.sample(16).unwrap();
+        assert_eq!(batch.paths.dims(), &[16, 9, 2]);
+        let lp = t.planner().log_prob(&batch.paths).unwrap().to_vec1::<f32>().unwrap();
+        let sampled = batch.log_prob.to_vec1::<f32>().unwrap();
+        for (a, b) in lp.iter().zip(&sampled) {
+            assert!((a - b).abs() < 1e-3 * a.abs().max(1.0), "{kind:?}: {a} vs {b}");
+        }
+        let before =
+            t.planner().mean_path(&Tensor::new(&[[1.5f32, -1.5]], &Device::Cpu).unwrap(), 8).unwrap();
+        for _ in 0..5 {
+            let s = t.update().unwrap();
+            assert!(s.mean_rho.is_finite() && s.loss.is_finite());
+        }
+        let after = t.planner().mean_path(&Tensor::new(&[[1.5f32, -1.5]], &Device::Cpu).unwrap(), 8).unwrap();
+        let moved = (after - before).unwrap().abs().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap();
+        assert!(moved > 1e-3, "{kind:?}: training moved the plan by {moved}");
+        // Deployment in plain Rust is for the GRU-ODE only, and says so.
+        let cfg = *t.planner().config();
+        let err = schrl::deployed::DeployedPlanner::from_varmap(t.varmap(), &cfg).unwrap_err();
+        assert!(err.to_string().contains(kind.name()), "{err}");
+    }
+    // Memoryless: the MLP's next mean from a waypoint is the same whatever came before.
+    let t = PlanTrainer::new(
+        Task::point(TaskKind::Seq),
+        CpgConfig { planner: PlannerKind::Mlp, ..Default::default() },
+    )
+    .unwrap();
+    let paths = Tensor::new(
+        &[[[0.0f32, 0.0], [1.0, 1.0], [0.5, 0.5]], [[3.0, -2.0], [1.0, 1.0], [0.5, 0.5]]],
+        &Device::Cpu,
+    )
+    .unwrap();
+    let (means, _) = t.planner().distributions(&paths).unwrap();
+    let m = means.to_vec3::<f32>().unwrap();
+    assert_eq!(m[0][1], m[1][1]);
+    assert_ne!(m[0][0], m[1][0]);
 }

@@ -13,6 +13,7 @@ use schrl::cpg::{CpgConfig, Method, PlanTrainer};
 use schrl::deployed::{DeployedPlanner, PlanScratch};
 use schrl::gradient_planner::{self, GradientPlannerConfig};
 use schrl::joint::mean_std;
+use schrl::planner::PlannerKind;
 use schrl::tasks::{Task, TaskKind};
 use sim::render::{Goal, PathKind, Polyline, Scene};
 use stl::Semantics;
@@ -52,6 +53,9 @@ pub struct TrainArgs {
     /// Task: seq, cover, branch, loop or signal.
     #[arg(long)]
     task: TaskKind,
+    /// Planner network: gru-ode (the paper's), or the ablations gru and mlp (Fig. 6).
+    #[arg(long, default_value = "gru-ode")]
+    planner: PlannerKind,
     /// cpg (constrained policy gradient) or pg (policy gradient only).
     #[arg(long, default_value = "cpg", value_parser = parse_method)]
     method: Method,
@@ -129,8 +133,13 @@ fn train(args: TrainArgs) -> Result<()> {
     let metrics_path = args.out.join("metrics.jsonl");
     let mut metrics = std::fs::File::create(&metrics_path)
         .with_context(|| format!("cannot write {}", metrics_path.display()))?;
-    let cfg =
-        CpgConfig { method: args.method, semantics: args.semantics, seed: args.seed, ..CpgConfig::default() };
+    let cfg = CpgConfig {
+        method: args.method,
+        semantics: args.semantics,
+        seed: args.seed,
+        planner: args.planner,
+        ..CpgConfig::default()
+    };
     let mut trainer = PlanTrainer::new(Task::point(args.task), cfg)?;
     let bar = ProgressBar::new(args.updates as u64);
     bar.set_style(
@@ -171,6 +180,7 @@ fn train(args: TrainArgs) -> Result<()> {
         hidden: trainer.planner().config().hidden,
         bound: trainer.planner().config().bound,
         min_std: trainer.planner().config().min_std,
+        planner: args.planner.name().into(),
     };
     checkpoint::save(&args.out, &trainer, &meta, args.force)?;
     let satisfaction = trainer.satisfaction(200)?;
