@@ -3,9 +3,9 @@
 # for each planner network and task, the satisfaction of 200 sampled paths and of 200
 # mean paths when training stops (95 % of sampled paths, or the update limit), and the
 # updates used; one line per run, then mean ± sample std over seeds.
-# Usage: [PLANNERS="gru-ode gru mlp"] [TASKS="seq cover branch"] [UPDATES=1000]
+# Usage: [PLANNERS="gru-ode gru mlp"] [TASKS="seq cover branch"] [UPDATES=3000]
 #        [EXTRA="--semantics hard"] scripts/planner-results.sh [OUT_DIR] [SEEDS...]
-# (defaults: those planners and tasks, 1000 updates, runs/planner, seeds 0 1 2 3 4)
+# (defaults: those planners and tasks, 3000 updates, runs/planner, seeds 0 1 2 3 4)
 set -euo pipefail
 out=${1:-runs/planner}
 shift || true
@@ -27,7 +27,7 @@ for planner in "${planners[@]}"; do
     sampled=() mean=() updates=()
     for seed in "${seeds[@]}"; do
       result=$(./target/release/schrl plan train --task "$task" --planner "$planner" --seed "$seed" \
-        --updates "${UPDATES:-1000}" "${extra[@]}" --out "$out/$planner-$task-$seed" --force)
+        --updates "${UPDATES:-3000}" "${extra[@]}" --out "$out/$planner-$task-$seed" --force)
       s=$(grep '^satisfaction:' <<<"$result" | awk '{print $2}')
       m=$(grep '^mean-path satisfaction:' <<<"$result" | awk '{print $3}')
       u=$(grep '^updates:' <<<"$result" | awk '{print $2}')

@@ -94,6 +94,10 @@ impl ControlReward for PathLengthReward {
     }
 }
 
+/// The fraction of satisfying sampled paths in one batch that makes an attempt
+/// promising ([`CpgConfig::restart_after`]): half.
+pub const PROMISING: f64 = 0.5;
+
 /// Hyper-parameters of planner training.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CpgConfig {
@@ -122,6 +126,15 @@ pub struct CpgConfig {
     pub seed: u64,
     /// The planner network (the paper's GRU-ODE, or a Fig. 6 ablation).
     pub planner: PlannerKind,
+    /// Restarts: an attempt that has not produced a batch in which at least
+    /// [`PROMISING`] of the sampled paths satisfy the spec within this many
+    /// [`PlanTrainer::update`]s is abandoned: the planner is re-initialised (from the
+    /// next seed of a deterministic sequence), with fresh Adam state and λ back at its
+    /// initial value. Once an attempt has been promising it is never abandoned. The
+    /// updates spent count towards any budget. `None`: never restart. The gradient
+    /// planner baseline restarts the same way (App. J). Joint training's updates
+    /// ([`PlanTrainer::update_on`]) never restart.
+    pub restart_after: Option<usize>,
 }
 
 impl Default for CpgConfig {
@@ -138,6 +151,10 @@ impl Default for CpgConfig {
             method: Method::Cpg,
             seed: 0,
             planner: PlannerKind::GruOde,
+            // Measured over seeds 0–4: seeds reaching 95 % of sampled paths went from
+            // 3/5, 5/5, 2/5 (Seq, Cover, Branch; never restarting, 1000 updates) to
+            // 5/5 each (restarting after 150; at most 799 updates). README.
+            restart_after: Some(150),
         }
     }
 }
@@ -167,6 +184,11 @@ pub struct PlanTrainer {
     control: Box<dyn ControlReward>,
     rng: ChaCha8Rng,
     cfg: CpgConfig,
+    /// Updates of the current attempt, and whether it has been promising.
+    attempt_updates: usize,
+    promising: bool,
+    /// Re-initialisations so far.
+    restarts: usize,
 }
 
 /// Draws every parameter from `U(−1/√fan_in, 1/√fan_in)` (PyTorch's default for GRU and
@@ -212,7 +234,28 @@ impl PlanTrainer {
             opt,
             task,
             cfg,
+            attempt_updates: 0,
+            promising: false,
+            restarts: 0,
         })
+    }
+
+    /// Re-initialisations made by the restart rule ([`CpgConfig::restart_after`]).
+    pub fn restarts(&self) -> usize {
+        self.restarts
+    }
+
+    /// Re-initialises the planner from the next seed of the restart sequence, with
+    /// fresh Adam state and λ at its initial value.
+    fn restart(&mut self) -> Result<()> {
+        self.restarts += 1;
+        let seed = self.cfg.seed.wrapping_add((self.restarts as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        seeded_init(&self.varmap, seed)?;
+        let params = ParamsAdamW { lr: self.cfg.lr, weight_decay: 0.0, ..Default::default() };
+        self.opt = AdamW::new(self.varmap.all_vars(), params)?;
+        self.lagrangian.lambda = self.cfg.lambda_init;
+        self.attempt_updates = 0;
+        Ok(())
     }
 
     /// Uses `reward` as the low-level reward `r_l`.
@@ -257,12 +300,18 @@ impl PlanTrainer {
     }
 
     /// One update on a fresh batch of sampled paths, with `r_l` from the configured
-    /// [`ControlReward`].
+    /// [`ControlReward`]; then the restart rule ([`CpgConfig::restart_after`]).
     pub fn update(&mut self) -> Result<UpdateStats> {
         let batch = self.sample(self.cfg.batch)?;
         let flat: Vec<f64> = batch.paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
         let rl = self.control.reward(&flat, self.task.steps, self.task.map.dim());
-        self.update_on(&batch, &rl)
+        let stats = self.update_on(&batch, &rl)?;
+        self.attempt_updates += 1;
+        self.promising |= stats.satisfaction >= PROMISING;
+        if !self.promising && self.cfg.restart_after.is_some_and(|n| self.attempt_updates >= n) {
+            self.restart()?;
+        }
+        Ok(stats)
     }
 
     /// Samples `n` paths from starts in the task's start region (training noise).

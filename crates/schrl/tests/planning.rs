@@ -281,3 +281,31 @@ fn ablation_planners_sample_score_and_train() {
     assert_eq!(m[0][1], m[1][1]);
     assert_ne!(m[0][0], m[1][0]);
 }
+
+/// The restart rule re-initialises the planner when an attempt has not been
+/// promising within `restart_after` updates, resets λ, and is deterministic.
+#[test]
+fn stagnation_restarts_reinitialise_deterministically() {
+    let run = |restart_after| {
+        let cfg = CpgConfig { batch: 8, restart_after, ..Default::default() };
+        let mut t = PlanTrainer::new(Task::point(TaskKind::Loop), cfg).unwrap();
+        let mut lambdas = Vec::new();
+        for _ in 0..12 {
+            // An untrained planner satisfies Loop with none of its samples.
+            assert_eq!(t.update().unwrap().satisfaction, 0.0);
+            lambdas.push(t.lagrangian().lambda);
+        }
+        let start = Tensor::new(&[[1.5f32, -1.5]], &Device::Cpu).unwrap();
+        let plan = t.planner().mean_path(&start, 4).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        (t.restarts(), lambdas, plan)
+    };
+    let (n, lambdas, plan) = run(Some(5));
+    assert_eq!(n, 2, "restarts after updates 5 and 10");
+    // λ climbs while the constraint is violated and starts over at each restart.
+    assert_eq!(lambdas[4], CpgConfig::default().lambda_init);
+    assert!(lambdas[3] > lambdas[0] && lambdas[5] > lambdas[4]);
+    assert_eq!(run(Some(5)), (n, lambdas, plan.clone()), "deterministic");
+    let (none, _, kept) = run(None);
+    assert_eq!(none, 0);
+    assert_ne!(kept, plan, "a restart changes the planner");
+}

@@ -56,6 +56,10 @@ pub struct TrainArgs {
     /// Planner network: gru-ode (the paper's), or the ablations gru and mlp (Fig. 6).
     #[arg(long, default_value = "gru-ode")]
     planner: PlannerKind,
+    /// Restart from a fresh initialisation when an attempt has not had half its
+    /// sampled paths satisfy the spec within this many updates (0: never).
+    #[arg(long, default_value_t = CpgConfig::default().restart_after.unwrap_or(0))]
+    restart_after: usize,
     /// cpg (constrained policy gradient) or pg (policy gradient only).
     #[arg(long, default_value = "cpg", value_parser = parse_method)]
     method: Method,
@@ -138,6 +142,7 @@ fn train(args: TrainArgs) -> Result<()> {
         semantics: args.semantics,
         seed: args.seed,
         planner: args.planner,
+        restart_after: (args.restart_after > 0).then_some(args.restart_after),
         ..CpgConfig::default()
     };
     let mut trainer = PlanTrainer::new(Task::point(args.task), cfg)?;
@@ -157,6 +162,7 @@ fn train(args: TrainArgs) -> Result<()> {
             serde_json::json!({
                 "update": update, "satisfaction": s.satisfaction, "mean_rho": s.mean_rho,
                 "lambda": s.lambda, "loss": s.loss, "seconds": start.elapsed().as_secs_f64(),
+                "restarts": trainer.restarts(),
             })
         )?;
         bar.set_position(update as u64);
@@ -191,6 +197,7 @@ fn train(args: TrainArgs) -> Result<()> {
         args.out.display()
     );
     println!("updates: {done}");
+    println!("restarts: {}", trainer.restarts());
     // Sampled paths are what training sees; mean paths are what `schrl train` deploys.
     println!("mean-path satisfaction: {}", trainer.mean_satisfaction(200)?);
     println!("satisfaction: {satisfaction}");
