@@ -44,6 +44,13 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // A reader that closes the pipe early (`schrl ... | head`) ends the process the
+    // usual way instead of making every `println!` panic.
+    #[cfg(unix)]
+    // SAFETY: called first thing on the main thread, before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Robustness(args) => commands::robustness::run(args),
