@@ -16,12 +16,7 @@ read -r -a tasks <<<"${TASKS:-seq cover branch}"
 read -r -a extra <<<"${EXTRA:-}"
 export RAYON_NUM_THREADS=1
 cargo build --release -q -p schrl-cli
-summary() { # mean ± sample std of the numbers on stdin
-  awk '{ s += $1; q += $1 * $1; n++ } END {
-    if (n == 0) { print "-"; exit }
-    m = s / n; v = n > 1 ? (q - n * m * m) / (n - 1) : 0; if (v < 0) v = 0
-    printf "%.3f ± %.3f", m, sqrt(v) }'
-}
+source "$(dirname "${BASH_SOURCE[0]}")/summary.sh"
 for planner in "${planners[@]}"; do
   for task in "${tasks[@]}"; do
     sampled=() mean=() updates=()
