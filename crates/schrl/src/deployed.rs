@@ -40,6 +40,9 @@ pub struct PlanScratch {
     h: Vec<f32>,
     gi: Vec<f32>,
     gh: Vec<f32>,
+    /// The current waypoint and the mean head's output.
+    g: Vec<f32>,
+    m: Vec<f32>,
 }
 
 fn weights(varmap: &VarMap, name: &str, shape: &[usize]) -> Result<Vec<f32>> {
@@ -113,11 +116,12 @@ impl DeployedPlanner {
         scratch.h.resize(hid, 0.0);
         out.clear();
         out.extend_from_slice(start);
-        let mut g: Vec<f32> = start.iter().map(|v| *v as f32).collect();
+        scratch.g.clear();
+        scratch.g.extend(start.iter().map(|v| *v as f32));
         for _ in 0..steps {
             scratch.gi.clear();
             scratch.gi.extend_from_slice(&self.b_ih);
-            add_product(&mut scratch.gi, &self.w_ih_t, &g);
+            add_product(&mut scratch.gi, &self.w_ih_t, &scratch.g);
             scratch.gh.clear();
             scratch.gh.extend_from_slice(&self.b_hh);
             add_product(&mut scratch.gh, &self.w_hh_t, &scratch.h);
@@ -128,12 +132,13 @@ impl DeployedPlanner {
                 let n = fast_tanh(gi[2 * hid + j] + r * gh[2 * hid + j]);
                 scratch.h[j] = (1.0 - z) * n + z * scratch.h[j];
             }
-            let mut m = self.b_mean.clone();
-            add_product(&mut m, &self.w_mean_t, &scratch.h);
-            for k in 0..d {
-                g[k] += self.bound * fast_tanh(m[k]);
+            scratch.m.clear();
+            scratch.m.extend_from_slice(&self.b_mean);
+            add_product(&mut scratch.m, &self.w_mean_t, &scratch.h);
+            for (g, m) in scratch.g[..d].iter_mut().zip(&scratch.m) {
+                *g += self.bound * fast_tanh(*m);
             }
-            out.extend(g.iter().map(|v| *v as f64));
+            out.extend(scratch.g.iter().map(|v| *v as f64));
         }
     }
 
