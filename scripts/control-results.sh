@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Trains general controllers for Point, Car and Drone over three seeds with the
 # default budgets and evaluates each on 500 random goals (README, "Controller
-# results"). Usage: scripts/control-results.sh [OUT_DIR]   (default: runs/control)
+# results"). Usage: [ROBOTS="car"] scripts/control-results.sh [OUT_DIR]
+# (default: all three robots, runs/control)
 set -euo pipefail
 out=${1:-runs/control}
 export RAYON_NUM_THREADS=1
 cargo build --release -q -p schrl-cli
-for robot in point car drone; do
+for robot in ${ROBOTS:-point car drone}; do
   for seed in 0 1 2; do
     dir="$out/$robot-$seed"
     start=$(date +%s.%N)

@@ -12,32 +12,29 @@
 //! exact (the minimum over convex pieces of their exact distances); inside, it is
 //! the depth within the deepest piece.
 
-/// Signed distance to an axis-aligned box with gradient (written to `g`).
-fn box_sdf(p: &[f64], center: &[f64], half: &[f64], g: &mut [f64]) -> f64 {
-    let d = p.len();
-    let mut out2 = 0.0;
-    let (mut qmax, mut axis) = (f64::NEG_INFINITY, 0);
-    let mut q = [0.0; 3];
-    for i in 0..d {
-        q[i] = (p[i] - center[i]).abs() - half[i];
-        out2 += q[i].max(0.0) * q[i].max(0.0);
-        if q[i] > qmax {
-            qmax = q[i];
-            axis = i;
-        }
-    }
+/// Signed distance from `p` to an axis-aligned rectangle (`center`, `half` size).
+/// Only a point beyond both edges needs a square root.
+#[inline]
+fn box_distance(p: &[f64], center: &[f64; 2], half: &[f64; 2]) -> f64 {
+    let q0 = (p[0] - center[0]).abs() - half[0];
+    let q1 = (p[1] - center[1]).abs() - half[1];
+    if q0 > 0.0 && q1 > 0.0 { (q0 * q0 + q1 * q1).sqrt() } else { q0.max(q1) }
+}
+
+/// The gradient of [`box_distance`] (written to `g[..2]`): toward the nearest point
+/// outside, along the axis of the nearest edge inside.
+fn box_gradient(p: &[f64], center: &[f64; 2], half: &[f64; 2], g: &mut [f64]) {
     let sign = |i: usize| if p[i] >= center[i] { 1.0 } else { -1.0 };
-    if qmax > 0.0 {
-        let out = out2.sqrt();
-        for i in 0..d {
-            g[i] = if q[i] > 0.0 { sign(i) * q[i] / out } else { 0.0 };
-        }
-        out
+    let q = [(p[0] - center[0]).abs() - half[0], (p[1] - center[1]).abs() - half[1]];
+    if q[0] > 0.0 || q[1] > 0.0 {
+        let out = [q[0].max(0.0), q[1].max(0.0)];
+        let n = out[0].hypot(out[1]);
+        g[0] = sign(0) * out[0] / n;
+        g[1] = sign(1) * out[1] / n;
     } else {
-        for (i, gi) in g.iter_mut().enumerate().take(d) {
-            *gi = if i == axis { sign(i) } else { 0.0 };
-        }
-        qmax
+        let axis = usize::from(q[1] > q[0]);
+        g[axis] = sign(axis);
+        g[1 - axis] = 0.0;
     }
 }
 
@@ -256,6 +253,9 @@ impl Map {
 
     /// Signed distance from `p` (length [`Map::dim`]) to the nearest obstacle.
     pub fn sdf(&self, p: &[f64]) -> f64 {
+        if let Map::Walls(w) = self {
+            return w.bars.iter().map(|(c, h)| box_distance(p, c, h)).fold(f64::INFINITY, f64::min);
+        }
         let mut g = [0.0; 3];
         self.sdf_grad(p, &mut g)
     }
@@ -265,15 +265,17 @@ impl Map {
     pub fn sdf_grad(&self, p: &[f64], g: &mut [f64]) -> f64 {
         match self {
             Map::Walls(w) => {
-                let mut best = f64::INFINITY;
-                let mut tmp = [0.0; 2];
-                for (c, h) in &w.bars {
-                    let d = box_sdf(p, c, h, &mut tmp);
+                // Distances first; the gradient only of the nearest bar.
+                let (mut best, mut nearest) = (f64::INFINITY, 0);
+                for (i, (c, h)) in w.bars.iter().enumerate() {
+                    let d = box_distance(p, c, h);
                     if d < best {
                         best = d;
-                        g[..2].copy_from_slice(&tmp);
+                        nearest = i;
                     }
                 }
+                let (c, h) = &w.bars[nearest];
+                box_gradient(p, c, h, g);
                 best
             }
             Map::Empty(_) => {

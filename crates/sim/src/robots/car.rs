@@ -63,6 +63,16 @@ const INV_INERTIA: f64 = 1.0 / INERTIA;
 const CASTER_DRAG: f64 = CASTER_DAMPING / (CASTER_RADIUS * CASTER_RADIUS);
 // Effective mass of a sideways impulse at the wheels' contact points.
 const LATERAL_MASS: f64 = 1.0 / (INV_MASS + WHEEL_X * WHEEL_X * INV_INERTIA);
+// Products of constants named once: the compiler keeps floating-point operations in
+// the order written, so `DT * f * INV_MASS` would be two dependent multiplies.
+const DT_M: f64 = DT * INV_MASS;
+const DT_I: f64 = DT * INV_INERTIA;
+/// A wheel's rolling damping seen at the ground: `c_w / r²` (N per m/s).
+const ROLL_DAMPING: f64 = WHEEL_DAMPING * INV_WHEEL_RADIUS * INV_WHEEL_RADIUS;
+/// Friction a wheel can transmit: `μ N`.
+const WHEEL_GRIP: f64 = MU * WHEEL_LOAD;
+/// Friction the caster can transmit: `μ N`.
+const CASTER_GRIP: f64 = MU * CASTER_LOAD;
 
 /// The Car's state.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -117,64 +127,70 @@ impl Planar {
     }
 }
 
-/// The wheels' ground forces (left, right) for motor `torque` at body velocity
-/// (`u`, yaw rate `w`): traction of a massless wheel, or `μ N` when it slips.
+/// The wheels' ground forces (left, right) for motor `drive` (torque / r) at body
+/// velocity (`u`, yaw rate `w`): traction `drive − c_w v / r²` of a massless wheel
+/// rolling at `v = u ∓ w y`, or `±μ N` when it slips.
 #[inline]
-fn traction(torque: [f64; 2], u: f64, w: f64) -> [f64; 2] {
-    let mut long = [0.0; 2];
-    for (i, y) in [WHEEL_Y, -WHEEL_Y].into_iter().enumerate() {
-        let v_long = u - w * y;
-        let rolling = (torque[i] - WHEEL_DAMPING * v_long * INV_WHEEL_RADIUS) * INV_WHEEL_RADIUS;
-        long[i] = if rolling.abs() <= MU * WHEEL_LOAD { rolling } else { MU * WHEEL_LOAD * rolling.signum() };
-    }
-    long
+fn traction(drive: [f64; 2], u: f64, w: f64) -> [f64; 2] {
+    // Summed so that the term waiting on `u` comes last.
+    let turn = ROLL_DAMPING * WHEEL_Y * w;
+    let roll = ROLL_DAMPING * u;
+    [(drive[0] + turn) - roll, (drive[1] - turn) - roll].map(|f| f.clamp(-WHEEL_GRIP, WHEEL_GRIP))
 }
 
-/// One physics step of 0.004 s.
+/// One physics step of 0.004 s (semi-implicit Euler).
 ///
-/// The chassis first turns by the yaw rate it starts the step with (the frame
-/// rotation then runs alongside the force computation instead of after it, which
-/// keeps the step's serial chain of operations short); forces, friction and the
-/// move follow. Both orders are first-order accurate; the turn conserves speed.
+/// Forces act in the frame the step starts in; the chassis then moves with the new
+/// velocity and its frame turns by the yaw rate the step started with (explicit
+/// Euler in the heading, so the turn is computed alongside the forces instead of
+/// after them). One environment is latency-bound on this step's chain of dependent
+/// operations, so sums are written with the operand that is ready last added last.
 #[inline]
-fn substep(mut st: Planar, torque: [f64; 2]) -> Planar {
-    // Turning the frame leaves the world velocity unchanged: its body-frame
-    // components rotate back by the same angle.
-    let (s, c) = st.heading.rotate(st.w * DT);
-    let (mut u, mut l, mut w) = (c * st.u + s * st.l, -s * st.u + c * st.l, st.w);
-    let long = traction(torque, u, w);
-    // Caster rolling drag, bounded by its friction.
-    let (cu, cl) = (u, l + w * CASTER_X);
-    let drag2 = CASTER_DRAG * CASTER_DRAG * (cu * cu + cl * cl);
-    let cap =
-        if drag2 > (MU * CASTER_LOAD) * (MU * CASTER_LOAD) { MU * CASTER_LOAD / drag2.sqrt() } else { 1.0 };
-    let (fcu, fcl) = (-CASTER_DRAG * cu * cap, -CASTER_DRAG * cl * cap);
-    // Explicit update with the traction and drag forces.
-    let fx = long[0] + long[1] + fcu;
-    let tau = -WHEEL_Y * long[0] + WHEEL_Y * long[1] + CASTER_X * fcl;
-    u += DT * fx * INV_MASS;
-    l += DT * fcl * INV_MASS;
-    w += DT * tau * INV_INERTIA;
+fn substep(st: Planar, drive: [f64; 2]) -> Planar {
+    let Planar { mut pos, u, l, w, mut heading } = st;
+    let long = traction(drive, u, w);
+    // Caster rolling drag `c_c v / r²`, bounded by its friction.
+    let cl = l + CASTER_X * w;
+    let speed2 = u * u + cl * cl;
+    let (fcu, fcl) = if speed2 * (CASTER_DRAG * CASTER_DRAG) > CASTER_GRIP * CASTER_GRIP {
+        let k = CASTER_GRIP / speed2.sqrt();
+        (-k * u, -k * cl)
+    } else {
+        (-CASTER_DRAG * u, -CASTER_DRAG * cl)
+    };
+    // Explicit update with the traction and drag forces; the wheels' torque about the
+    // centre is `y (f_right − f_left)`.
+    let u_new = (u + DT_M * fcu) + DT_M * (long[0] + long[1]);
+    let l_mid = l + DT_M * fcl;
+    let w_spin = w + DT_I * CASTER_X * fcl;
+    let w_mid = w_spin + DT_I * WHEEL_Y * (long[1] - long[0]);
     // Sideways friction: both wheels sit at the same x, so their contact points
-    // slide sideways at one speed; the impulse that stops it is bounded by the
-    // friction both wheels have left after traction (the fixed point of a
+    // slide sideways at one speed, `l + x w`; the impulse that stops it is bounded by
+    // the friction both wheels have left after traction (the fixed point of a
     // Gauss–Seidel contact solve, in closed form).
-    let want = -(l + w * WHEEL_X) * LATERAL_MASS;
+    let want = -LATERAL_MASS * (l_mid + WHEEL_X * w_spin)
+        - (LATERAL_MASS * WHEEL_X * DT_I * WHEEL_Y) * (long[1] - long[0]);
     // √(a² − f²) ≥ a − |f|: when the impulse is within that bound, no root is needed.
-    let a = MU * WHEEL_LOAD;
+    let a = WHEEL_GRIP;
     let j = if want.abs() <= (2.0 * a - long[0].abs() - long[1].abs()) * DT {
         want
+    } else if long[0].abs() >= a && long[1].abs() >= a {
+        // Both wheels slip (the common case at full torque): no friction is left.
+        0.0
     } else {
         let room = |f: f64| (a * a - f * f).max(0.0).sqrt();
         let limit = (room(long[0]) + room(long[1])) * DT;
         want.clamp(-limit, limit)
     };
-    l += j * INV_MASS;
-    w += WHEEL_X * j * INV_INERTIA;
-    let [vx, vy] = st.heading.to_world([u, l]);
-    st.pos[0] += DT * vx;
-    st.pos[1] += DT * vy;
-    Planar { pos: st.pos, u, l, w, heading: st.heading }
+    let l_new = l_mid + INV_MASS * j;
+    let w_new = w_mid + WHEEL_X * INV_INERTIA * j;
+    let [vx, vy] = heading.to_world([u_new, l_new]);
+    pos[0] += DT * vx;
+    pos[1] += DT * vy;
+    // Turning the frame leaves the world velocity unchanged: its body-frame
+    // components rotate back by the same angle.
+    let (s, c) = heading.rotate(w * DT);
+    Planar { pos, u: c * u_new + s * l_new, l: -s * u_new + c * l_new, w: w_new, heading }
 }
 
 impl Dynamics for Car {
@@ -197,6 +213,7 @@ impl Dynamics for Car {
 
     fn advance(&mut self, action: &[f64], map: &Map, _goal: &[f64]) -> bool {
         let torque = [action[0].clamp(-MOTOR_LIMIT, MOTOR_LIMIT), action[1].clamp(-MOTOR_LIMIT, MOTOR_LIMIT)];
+        let drive = torque.map(|t| t * INV_WHEEL_RADIUS);
         let t = DT * SUBSTEPS as f64;
         let mut guard = ContactGuard::new(map, &self.pos, RADIUS);
         let mut collided = false;
@@ -205,7 +222,7 @@ impl Dynamics for Car {
         let mut before = self.vel;
         for _ in 0..SUBSTEPS {
             before = st.world_vel();
-            st = substep(st, torque);
+            st = substep(st, drive);
             let travel = (st.u.abs() + st.l.abs()) * DT; // rotation-invariant L1 bound
             if guard.may_touch(travel) {
                 let mut v = st.world_vel();
@@ -217,10 +234,10 @@ impl Dynamics for Car {
         self.vel = st.world_vel();
         self.yaw_rate = st.w;
         self.heading = st.heading;
-        let long = traction(torque, st.u, st.w);
+        let long = traction(drive, st.u, st.w);
         for i in 0..2 {
             let v_long = st.u - st.w * [WHEEL_Y, -WHEEL_Y][i];
-            self.wheel_speed[i] = if long[i].abs() < MU * WHEEL_LOAD {
+            self.wheel_speed[i] = if long[i].abs() < WHEEL_GRIP {
                 v_long * INV_WHEEL_RADIUS
             } else {
                 (torque[i] - WHEEL_RADIUS * long[i]) * INV_WHEEL_DAMPING

@@ -97,7 +97,7 @@ impl Heading {
 
     /// Removes rounding drift from the unit length.
     pub fn normalize(&mut self) {
-        let k = 1.0 / (self.c * self.c + self.s * self.s).sqrt();
+        let k = crate::rotation::inv_norm(self.c * self.c + self.s * self.s);
         self.c *= k;
         self.s *= k;
     }
