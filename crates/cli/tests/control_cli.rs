@@ -125,6 +125,8 @@ fn joint_train_resume_and_eval_end_to_end() {
         "--eval-groups",
         "1",
         "--joint-planner",
+        "--planner",
+        "mlp",
     ];
     let o = schrl(&[&args[..], &["--controller", ctl.to_str().unwrap(), "--out", run_s]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
@@ -143,6 +145,9 @@ fn joint_train_resume_and_eval_end_to_end() {
     ] {
         assert!(run.join(f).exists(), "{f} missing");
     }
+    // The planner network is part of the run: resume and eval rebuild the MLP.
+    let meta = std::fs::read_to_string(run.join("joint.json")).unwrap();
+    assert!(meta.contains("\"planner\": \"mlp\""), "{meta}");
     let o = schrl(&[&args[..], &["--controller", ctl.to_str().unwrap(), "--out", run_s]].concat());
     assert!(!o.status.success() && stderr(&o).contains("--force"), "{}", stderr(&o));
     let lines = |p: &std::path::Path| std::fs::read_to_string(p).unwrap().lines().count();

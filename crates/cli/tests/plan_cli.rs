@@ -49,6 +49,8 @@ fn bad_arguments_are_clear_errors() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("point robot only"));
     let o = schrl(&["plan", "train", "--task", "seq", "--planner", "lstm", "--out", "x"]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("unknown planner 'lstm'"));
+    let o = schrl(&["plan", "train", "--task", "seq", "--safe-along", "edges", "--out", "x"]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("'edges' is not segments or waypoints"));
     let o = schrl(&["plan", "sample", "--ckpt", "/nonexistent/ckpt"]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("planner.json"));
 }
@@ -58,10 +60,26 @@ fn an_ablation_planner_round_trips_through_its_checkpoint() {
     let dir = std::env::temp_dir().join(format!("schrl-plan-mlp-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let out = dir.to_str().unwrap();
-    let o = schrl(&["plan", "train", "--task", "branch", "--planner", "mlp", "--updates", "5", "--out", out]);
+    let o = schrl(&[
+        "plan",
+        "train",
+        "--task",
+        "branch",
+        "--planner",
+        "mlp",
+        "--safe-along",
+        "waypoints",
+        "--updates",
+        "5",
+        "--out",
+        out,
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let meta = std::fs::read_to_string(dir.join("planner.json")).unwrap();
-    assert!(meta.contains("\"planner\": \"mlp\""), "{meta}");
+    assert!(
+        meta.contains("\"planner\": \"mlp\"") && meta.contains("\"safe_along\": \"waypoints\""),
+        "{meta}"
+    );
     let o = schrl(&["plan", "sample", "--ckpt", out, "--n", "10"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // Only the GRU-ODE has a plain-Rust deployment to time.

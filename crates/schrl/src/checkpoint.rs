@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::cpg::PlanTrainer;
 use crate::planner::{PathPlanner, PlannerConfig, PlannerKind};
-use crate::tasks::{Task, TaskKind};
+use crate::tasks::{SafeAlong, Task, TaskKind};
 
 /// What a checkpoint records besides the weights.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -45,6 +45,14 @@ pub struct PlannerMeta {
     /// checkpoints), `gru` or `mlp`.
     #[serde(default = "default_planner")]
     pub planner: String,
+    /// Where the task's `safe` was checked in training: `segments` (the task files'
+    /// default, and that of older checkpoints) or `waypoints`.
+    #[serde(default = "default_safe_along")]
+    pub safe_along: String,
+}
+
+fn default_safe_along() -> String {
+    SafeAlong::default().name().to_string()
 }
 
 fn default_planner() -> String {
@@ -142,7 +150,8 @@ pub fn load(dir: &Path) -> Result<LoadedPlanner, CheckpointError> {
         return Err(invalid(format!("robot '{}' has no planner tasks yet (only point)", meta.robot)));
     }
     let kind: TaskKind = meta.task.parse().map_err(invalid)?;
-    let task = Task::point(kind);
+    let mut task = Task::point(kind);
+    task.safe_along = meta.safe_along.parse().map_err(|e: String| invalid(format!("safe_along: {e}")))?;
     if meta.dim != task.map.dim() {
         return Err(invalid(format!(
             "plan dimension {} does not match the {} task's {}",

@@ -481,6 +481,7 @@ pub mod run_dir {
     use super::{JointConfig, JointTrainer};
     use crate::checkpoint::{CheckpointError, io, write_atomic};
     use crate::cpg::{CpgConfig, Method};
+    use crate::planner::PlannerKind;
     use crate::tasks::Task;
 
     const META: &str = "joint.json";
@@ -500,6 +501,13 @@ pub mod run_dir {
         iterations: usize,
         env_steps: usize,
         lambda: f64,
+        /// The planner network (runs saved before it was recorded used the GRU-ODE).
+        #[serde(default = "gru_ode")]
+        planner: String,
+    }
+
+    fn gru_ode() -> String {
+        PlannerKind::GruOde.name().into()
     }
 
     /// `true` if `dir` holds a joint run.
@@ -525,6 +533,7 @@ pub mod run_dir {
             iterations: t.iterations,
             env_steps: t.env_steps,
             lambda: t.plan.lagrangian().lambda,
+            planner: cfg.planner.name().into(),
         };
         let planner = dir.join(PLANNER);
         write_atomic(&planner, |p| t.plan.varmap().save(p).map_err(|e| e.to_string()))?;
@@ -550,6 +559,7 @@ pub mod run_dir {
                 "pg" => Method::Pg,
                 other => return Err(invalid(format!("method '{other}' is not cpg or pg"))),
             },
+            planner: meta.planner.parse().map_err(|e: String| invalid(format!("planner: {e}")))?,
             ..CpgConfig::default()
         };
         let control = crate::control::checkpoint::load(&dir.join(CONTROLLER))?;

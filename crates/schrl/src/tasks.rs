@@ -96,6 +96,28 @@ pub enum SafeAlong {
     Waypoints,
 }
 
+impl SafeAlong {
+    /// The name used in task files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            SafeAlong::Segments => "segments",
+            SafeAlong::Waypoints => "waypoints",
+        }
+    }
+}
+
+impl std::str::FromStr for SafeAlong {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "segments" => Ok(SafeAlong::Segments),
+            "waypoints" => Ok(SafeAlong::Waypoints),
+            other => Err(format!("'{other}' is not segments or waypoints")),
+        }
+    }
+}
+
 /// A task: spec, goals, plan length, start region, map, robot.
 #[derive(Clone, Debug)]
 pub struct Task {
@@ -351,7 +373,7 @@ impl Task {
         let safe = MapClearance::new(self.map.clone(), self.safe_radius).along(self.safe_along);
         out.push(("safe".into(), Arc::new(safe)));
         if let Some(step) = self.counter_from {
-            out.push(("counter".into(), Arc::new(AfterStep { step })));
+            out.push(("counter".into(), Arc::new(AfterStep { step, truth: COUNTER_TRUTH })));
         }
         out
     }
@@ -401,6 +423,10 @@ pub struct MapClearance {
     radius: f64,
     along: SafeAlong,
 }
+
+/// `k` of the Signal counter (`±k`, [`AfterStep`]): above any distance on the maps,
+/// so the counter's ⊥ never floors the until that reads it (the paper writes −1).
+pub const COUNTER_TRUTH: f64 = 100.0;
 
 /// Clearance reported where a map has no obstacle at all.
 pub const OPEN_CLEARANCE: f64 = 100.0;

@@ -148,6 +148,7 @@ fn checkpoint_round_trip_gives_the_same_paths() {
         bound: 10.0,
         min_std: 0.1,
         planner: "gru-ode".into(),
+        safe_along: "segments".into(),
     };
     schrl::checkpoint::save(&dir, &t, &meta, false).unwrap();
     assert!(matches!(

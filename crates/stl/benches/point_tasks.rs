@@ -84,7 +84,7 @@ pub fn point_tasks() -> Vec<Task> {
         build("signal", format!("F[1,12] final & ({}) U[1,12] counter", loop_body(4)), 12, |b| {
             goals(b, "l", &corners, 0.8)
                 .bind("final", Ball::new([0.0, 0.0], 0.8))
-                .bind("counter", AfterStep { step: 10 })
+                .bind("counter", AfterStep { step: 10, truth: 100.0 })
         }),
     ]
 }

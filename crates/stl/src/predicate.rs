@@ -318,17 +318,26 @@ impl Predicate for AvoidBoxes {
     }
 }
 
-/// A signal of time alone: `−1` before waypoint `step`, `+1` from it on. The paper's
-/// Signal task uses one as its counter ("false until the 10th waypoint", App. G).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// A signal of time alone: `−k` (⊥) before waypoint `step`, `+k` (⊤) from it on,
+/// with `k = truth` (paper App. C: ⊤ is some `k > 0`, ⊥ is `−k`). The paper's Signal
+/// task uses one as its counter ("false until the 10th waypoint", App. G).
+///
+/// Choose `k` above every value the rest of a formula can take. In `φ U[a,b] counter`
+/// the first term is `min(⊥, ∅) = −k`, a floor on the until's robustness: with the
+/// paper's `k = 1` any loop body violated by more than 1 m sits on that floor, where
+/// the robustness has no gradient, and the Signal planner never trains (0 of 5 seeds;
+/// 3 of 3 with `k = 100`, issue 6).
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AfterStep {
     /// First step at which the predicate holds.
     pub step: usize,
+    /// `k`: the value when it holds (`−k` before).
+    pub truth: f64,
 }
 
 impl Predicate for AfterStep {
     fn value(&self, t: usize, _state: &[f64]) -> f64 {
-        if t >= self.step { 1.0 } else { -1.0 }
+        if t >= self.step { self.truth } else { -self.truth }
     }
 
     fn value_and_grad(&self, t: usize, state: &[f64], _scale: f64, _grad: &mut [f64]) -> f64 {

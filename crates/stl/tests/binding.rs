@@ -92,11 +92,13 @@ fn closures_and_time_predicates() {
     });
     fd_check(&exact, &[0.3, -0.4]);
     // The Signal task's counter: false until step 10.
-    let c = AfterStep { step: 10 };
+    let c = AfterStep { step: 10, truth: 1.0 };
     assert_eq!((c.value(9, &[]), c.value(10, &[])), (-1.0, 1.0));
     let spec = Spec::builder(parse("F counter").unwrap()).state_dim(1).bind("counter", c).build().unwrap();
     assert_eq!(spec.robustness(&[0.0; 5], &Semantics::hard()).unwrap(), -1.0);
     assert_eq!(spec.robustness(&[0.0; 11], &Semantics::hard()).unwrap(), 1.0);
+    let c = AfterStep { step: 10, truth: 100.0 };
+    assert_eq!((c.value(9, &[]), c.value(10, &[])), (-100.0, 100.0));
 }
 
 #[test]
@@ -115,4 +117,26 @@ fn batches_equal_single_paths() {
             assert_eq!(&grads[b * steps * 2..(b + 1) * steps * 2], &g[..]);
         }
     }
+}
+
+/// Regression (issue 6, Signal 0/5 seeds): with a counter of `±1`, `φ U counter`
+/// floored at `−1` and gave the loop body `φ` no gradient once `φ < −1`. With `⊥`
+/// below every value of `φ`, the until reads `φ` and its gradient reaches it.
+#[test]
+fn until_a_counter_passes_the_gradient_of_a_badly_violated_left_side() {
+    let until = |truth: f64| {
+        Spec::builder(parse("x > 0 U[1,3] counter").unwrap())
+            .signals(["x"])
+            .bind("counter", AfterStep { step: 3, truth })
+            .build()
+            .unwrap()
+    };
+    // x = −5 throughout: the left side is violated by 5.
+    let path = [-5.0; 4];
+    let (rho, grad) = until(1.0).gradient(&path, &Semantics::hard()).unwrap();
+    assert_eq!(rho, -1.0);
+    assert!(grad.iter().all(|g| *g == 0.0), "the floor hides x: {grad:?}");
+    let (rho, grad) = until(100.0).gradient(&path, &Semantics::hard()).unwrap();
+    assert_eq!(rho, -5.0);
+    assert!(grad.iter().any(|g| *g != 0.0), "x gets a gradient: {grad:?}");
 }

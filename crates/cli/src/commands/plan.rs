@@ -14,7 +14,7 @@ use schrl::deployed::{DeployedPlanner, PlanScratch};
 use schrl::gradient_planner::{self, GradientPlannerConfig};
 use schrl::joint::mean_std;
 use schrl::planner::PlannerKind;
-use schrl::tasks::{Task, TaskKind};
+use schrl::tasks::{SafeAlong, Task, TaskKind};
 use sim::render::{Goal, PathKind, Polyline, Scene};
 use stl::Semantics;
 
@@ -56,6 +56,11 @@ pub struct TrainArgs {
     /// Planner network: gru-ode (the paper's), or the ablations gru and mlp (Fig. 6).
     #[arg(long, default_value = "gru-ode")]
     planner: PlannerKind,
+    /// Where the task's `safe` is checked: segments (the task's default: the straight
+    /// segment into each waypoint, what a controller drives) or waypoints (the
+    /// paper's literal `□ safe` on the plan's states).
+    #[arg(long)]
+    safe_along: Option<SafeAlong>,
     /// Restart from a fresh initialisation when an attempt has not had half its
     /// sampled paths satisfy the spec within this many updates (0: never).
     #[arg(long, default_value_t = CpgConfig::default().restart_after.unwrap_or(0))]
@@ -145,7 +150,11 @@ fn train(args: TrainArgs) -> Result<()> {
         restart_after: (args.restart_after > 0).then_some(args.restart_after),
         ..CpgConfig::default()
     };
-    let mut trainer = PlanTrainer::new(Task::point(args.task), cfg)?;
+    let mut task = Task::point(args.task);
+    if let Some(along) = args.safe_along {
+        task.safe_along = along;
+    }
+    let mut trainer = PlanTrainer::new(task, cfg)?;
     let bar = ProgressBar::new(args.updates as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} updates {msg}").expect("valid template"),
@@ -187,6 +196,7 @@ fn train(args: TrainArgs) -> Result<()> {
         bound: trainer.planner().config().bound,
         min_std: trainer.planner().config().min_std,
         planner: args.planner.name().into(),
+        safe_along: trainer.task().safe_along.name().into(),
     };
     checkpoint::save(&args.out, &trainer, &meta, args.force)?;
     let satisfaction = trainer.satisfaction(200)?;

@@ -11,6 +11,7 @@ use schrl::cpg::{CpgConfig, Method, NoControlReward, PathLengthReward};
 use schrl::joint::{
     JointConfig, JointMetrics, JointTrainer, PlanChoice, TaskEval, evaluate_task, mean_std, run_dir,
 };
+use schrl::planner::PlannerKind;
 use schrl::tasks::{Task, TaskKind};
 use sim::Robot;
 use sim::render::{ChartPanel, Goal, PathKind, Polyline, Scene};
@@ -44,6 +45,11 @@ pub struct TrainArgs {
     /// at soft:2, 60 % at soft:10 after 2000 updates).
     #[arg(long, default_value = "soft:10")]
     semantics: Semantics,
+    /// Planner network: gru-ode (the paper's), or gru or mlp (Fig. 6). The memoryless
+    /// MLP suits Loop, whose next corner depends on the current one alone (paper
+    /// §4.4; here it trains Loop where the GRU-ODE does not, README).
+    #[arg(long, default_value = "gru-ode")]
+    planner: PlannerKind,
     /// Paths planned and executed per iteration.
     #[arg(long, default_value_t = 8)]
     plan_batch: usize,
@@ -210,6 +216,7 @@ pub fn train(args: TrainArgs) -> Result<()> {
             method: Method::Cpg,
             pg_weight: args.pg_weight,
             lambda_lr: args.lambda_lr,
+            planner: args.planner,
             ..CpgConfig::default()
         };
         let mut t = JointTrainer::new(task, joint, cpg, control)?;
