@@ -24,6 +24,8 @@ use rand_chacha::ChaCha8Rng;
 use stl::Semantics;
 use stl::tensor::TensorSpec;
 
+use crate::control::adam::Adam;
+use crate::gru_ode_backprop::{GruOdeBackprop, Source, Tape};
 use crate::planner::{PathPlanner, PlanBatch, PlannerConfig, PlannerKind};
 use crate::tasks::{self, Task};
 
@@ -177,6 +179,9 @@ pub struct PlanTrainer {
     varmap: VarMap,
     planner: PathPlanner,
     opt: AdamW,
+    /// The GRU-ODE's hand-written update (`None` for the ablation planners, which
+    /// train through candle's autodiff with `opt`).
+    fast: Option<FastUpdate>,
     spec: TensorSpec,
     hard: stl::Spec,
     task: Task,
@@ -189,6 +194,31 @@ pub struct PlanTrainer {
     promising: bool,
     /// Re-initialisations so far.
     restarts: usize,
+}
+
+/// The hand-written update's network, activations and Adam state.
+struct FastUpdate {
+    net: GruOdeBackprop,
+    tape: Tape,
+    adam: Adam,
+    grad: Vec<f32>,
+}
+
+impl FastUpdate {
+    fn new(varmap: &VarMap, cfg: &PlannerConfig) -> Result<Option<Self>> {
+        if cfg.kind != PlannerKind::GruOde {
+            return Ok(None);
+        }
+        let net = GruOdeBackprop::from_varmap(varmap, cfg)?;
+        let adam = candle_adam(net.num_params());
+        Ok(Some(Self { net, tape: Tape::default(), adam, grad: Vec::new() }))
+    }
+}
+
+/// Adam as candle's `AdamW` without weight decay (β 0.9/0.999, ε 1e-8), so both
+/// update paths follow the same algorithm.
+fn candle_adam(n: usize) -> Adam {
+    Adam { eps: 1e-8, ..Adam::new(n) }
 }
 
 /// Draws every parameter from `U(−1/√fan_in, 1/√fan_in)` (PyTorch's default for GRU and
@@ -223,7 +253,9 @@ impl PlanTrainer {
         seeded_init(&varmap, cfg.seed)?;
         let params = ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..Default::default() };
         let opt = AdamW::new(varmap.all_vars(), params)?;
+        let fast = FastUpdate::new(&varmap, planner.config())?;
         Ok(Self {
+            fast,
             spec: task.tensor_spec(),
             hard: task.spec(),
             lagrangian: Lagrangian { lambda: cfg.lambda_init, lr: cfg.lambda_lr, epsilon: cfg.epsilon },
@@ -253,6 +285,10 @@ impl PlanTrainer {
         seeded_init(&self.varmap, seed)?;
         let params = ParamsAdamW { lr: self.cfg.lr, weight_decay: 0.0, ..Default::default() };
         self.opt = AdamW::new(self.varmap.all_vars(), params)?;
+        if let Some(f) = &mut self.fast {
+            f.net.load(&self.varmap)?;
+            f.adam = candle_adam(f.net.num_params());
+        }
         self.lagrangian.lambda = self.cfg.lambda_init;
         self.attempt_updates = 0;
         Ok(())
@@ -302,10 +338,22 @@ impl PlanTrainer {
     /// One update on a fresh batch of sampled paths, with `r_l` from the configured
     /// [`ControlReward`]; then the restart rule ([`CpgConfig::restart_after`]).
     pub fn update(&mut self) -> Result<UpdateStats> {
-        let batch = self.sample(self.cfg.batch)?;
-        let flat: Vec<f64> = batch.paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
-        let rl = self.control.reward(&flat, self.task.steps, self.task.map.dim());
-        let stats = self.update_on(&batch, &rl)?;
+        let stats = if self.fast.is_some() {
+            let n = self.cfg.batch;
+            let starts: Vec<f32> = self.task.sample_starts(&mut self.rng, n)?.flatten_all()?.to_vec1()?;
+            let noise: Vec<f32> = self.task.sample_noise(&mut self.rng, n)?.flatten_all()?.to_vec1()?;
+            let f = self.fast.as_mut().expect("checked");
+            let source = Source::Sample { starts: &starts, noise: &noise };
+            f.net.forward(source, n, self.task.steps, &mut f.tape);
+            let flat: Vec<f64> = f.tape.paths.iter().map(|v| *v as f64).collect();
+            let rl = self.control.reward(&flat, self.task.steps, self.task.map.dim());
+            self.fast_update(&flat, &rl)?
+        } else {
+            let batch = self.sample(self.cfg.batch)?;
+            let flat: Vec<f64> = batch.paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
+            let rl = self.control.reward(&flat, self.task.steps, self.task.map.dim());
+            self.update_on(&batch, &rl)?
+        };
         self.attempt_updates += 1;
         self.promising |= stats.satisfaction >= PROMISING;
         if !self.promising && self.cfg.restart_after.is_some_and(|n| self.attempt_updates >= n) {
@@ -328,6 +376,12 @@ impl PlanTrainer {
         let b = batch.paths.dim(0)?;
         if rl.len() != b {
             candle_core::bail!("{} low-level rewards for {b} paths", rl.len());
+        }
+        if let Some(f) = &mut self.fast {
+            let paths: Vec<f32> = batch.paths.to_dtype(DType::F32)?.flatten_all()?.to_vec1()?;
+            f.net.forward(Source::Paths(&paths), b, self.task.steps, &mut f.tape);
+            let flat: Vec<f64> = paths.iter().map(|v| *v as f64).collect();
+            return self.fast_update(&flat, rl);
         }
         let rho = self.spec.robustness(&batch.paths, &self.cfg.semantics)?;
         let rho_v: Vec<f64> = rho.to_dtype(DType::F64)?.to_vec1()?;
@@ -365,9 +419,52 @@ impl PlanTrainer {
         })
     }
 
+    /// The update of [`PlanTrainer::update_on`] for the GRU-ODE, by hand
+    /// ([`crate::gru_ode_backprop`]): the forward pass over `paths` (`[batch][steps +
+    /// 1][dim]`) is already on the tape. Same loss, same Adam, same dual step.
+    fn fast_update(&mut self, paths: &[f64], rl: &[f64]) -> Result<UpdateStats> {
+        let b = rl.len();
+        let steps = self.task.steps + 1;
+        let stl_err = |e: stl::EvalError| candle_core::Error::Msg(format!("spec: {e}"));
+        let mut drho = vec![0.0; paths.len()];
+        let (rho, hard) = self
+            .hard
+            .gradient_batch_and_robustness(paths, steps, &self.cfg.semantics, &mut drho, &Semantics::hard())
+            .map_err(stl_err)?;
+        let rh: Vec<f64> = rho.iter().zip(rl).map(|(a, b)| a + b).collect();
+        let mean = rh.iter().sum::<f64>() / b as f64;
+        let std = (rh.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / b as f64).sqrt() + 1e-8;
+        let adv: Vec<f64> = rh.iter().map(|x| (x - mean) / std).collect();
+        let w = self.cfg.pg_weight;
+        let score: Vec<f32> = adv.iter().map(|a| (w * a / b as f64) as f32).collect();
+        let lambda = if self.cfg.method == Method::Cpg { self.lagrangian.lambda } else { 0.0 };
+        let drho: Vec<f32> = drho.iter().map(|g| (g * lambda / b as f64) as f32).collect();
+        let f = self.fast.as_mut().expect("fast update");
+        let FastUpdate { net, tape, adam, grad } = f;
+        net.backward(tape, &drho, &score, grad);
+        adam.step(&mut net.params, grad, self.cfg.lr as f32, f32::INFINITY);
+        net.store(&self.varmap)?;
+        let mean_rho = rho.iter().sum::<f64>() / b as f64;
+        if self.cfg.method == Method::Cpg {
+            self.lagrangian.update(hard.iter().sum::<f64>() / b as f64);
+        }
+        // At ratio 1 the clipped surrogate is the mean advantage.
+        let surrogate = adv.iter().sum::<f64>() / b as f64;
+        Ok(UpdateStats {
+            mean_rho,
+            satisfaction: fraction_satisfied(&hard),
+            lambda: self.lagrangian.lambda,
+            loss: -(w * surrogate + lambda * mean_rho),
+        })
+    }
+
     /// Loads planner weights saved from a trainer of the same shape.
     pub fn load_weights(&mut self, path: &std::path::Path) -> Result<()> {
-        self.varmap.load(path)
+        self.varmap.load(path)?;
+        if let Some(f) = &mut self.fast {
+            f.net.load(&self.varmap)?;
+        }
+        Ok(())
     }
 
     /// Sets the dual variable (restoring a checkpoint).

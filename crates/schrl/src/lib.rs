@@ -20,6 +20,7 @@ pub mod cpg;
 pub mod deployed;
 pub mod execute;
 pub mod gradient_planner;
+pub mod gru_ode_backprop;
 pub mod joint;
 pub mod neural_sdf;
 pub mod planner;

@@ -340,14 +340,43 @@ impl Spec {
         sem: &Semantics,
         grads: &mut [f64],
     ) -> Result<Vec<f64>, EvalError> {
+        Ok(self.gradient_batch_impl(paths, steps, sem, grads, None)?.0)
+    }
+
+    /// [`Spec::gradient_batch`] under `sem`, and each path's robustness under `other`
+    /// from the same predicate values (e.g. the hard robustness that decides
+    /// satisfaction next to the soft one a loss differentiates).
+    pub fn gradient_batch_and_robustness(
+        &self,
+        paths: &[f64],
+        steps: usize,
+        sem: &Semantics,
+        grads: &mut [f64],
+        other: &Semantics,
+    ) -> Result<(Vec<f64>, Vec<f64>), EvalError> {
+        self.gradient_batch_impl(paths, steps, sem, grads, Some(other))
+    }
+
+    fn gradient_batch_impl(
+        &self,
+        paths: &[f64],
+        steps: usize,
+        sem: &Semantics,
+        grads: &mut [f64],
+        other: Option<&Semantics>,
+    ) -> Result<(Vec<f64>, Vec<f64>), EvalError> {
         let per = self.check_batch(paths.len(), steps)?;
         if grads.len() != paths.len() {
             return Err(EvalError::BatchShape { len: grads.len(), steps, dim: self.state_dim });
         }
         sem.validate()?;
+        if let Some(o) = other {
+            o.validate()?;
+        }
         let run = |ev: &mut Evaluator<'_>, (p, g): (&[f64], &mut [f64])| {
             g.fill(0.0);
-            ev.gradient(p, 0, sem, g).expect("shape checked")
+            let rho = ev.gradient(p, 0, sem, g).expect("shape checked");
+            (rho, other.map_or(rho, |o| ev.reevaluate(0, o).expect("validated")))
         };
         #[cfg(feature = "parallel")]
         {
@@ -357,12 +386,12 @@ impl Spec {
                 .zip(grads.par_chunks_mut(per))
                 .with_min_len(64)
                 .map_init(|| self.evaluator(), run)
-                .collect())
+                .unzip())
         }
         #[cfg(not(feature = "parallel"))]
         {
             let mut ev = self.evaluator();
-            Ok(paths.chunks(per).zip(grads.chunks_mut(per)).map(|pg| run(&mut ev, pg)).collect())
+            Ok(paths.chunks(per).zip(grads.chunks_mut(per)).map(|pg| run(&mut ev, pg)).unzip())
         }
     }
 }
@@ -439,5 +468,19 @@ impl Evaluator<'_> {
             }
         }
         Ok(rho)
+    }
+
+    /// Robustness at start step `t` of the path last evaluated, under `sem`, from the
+    /// predicate values already computed (no predicate is evaluated again: with
+    /// map-clearance predicates those are the expensive part).
+    pub fn reevaluate(&mut self, t: usize, sem: &Semantics) -> Result<f64, EvalError> {
+        sem.validate()?;
+        let np = self.spec.predicates.len().max(1);
+        let n = self.values.len() / np;
+        if n == 0 {
+            return Err(EvalError::Empty);
+        }
+        self.spec.program.forward(&self.values, n, sem, &mut self.ws);
+        Ok(self.ws.signal()[t.min(n - 1)])
     }
 }

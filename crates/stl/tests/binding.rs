@@ -116,6 +116,12 @@ fn batches_equal_single_paths() {
             assert_eq!(rg[b], r);
             assert_eq!(&grads[b * steps * 2..(b + 1) * steps * 2], &g[..]);
         }
+        // The same gradient plus the hard robustness from the same predicate values.
+        let mut both = vec![0.0; paths.len()];
+        let (rb, hard) =
+            spec.gradient_batch_and_robustness(&paths, steps, &sem, &mut both, &Semantics::hard()).unwrap();
+        assert_eq!((rb, both), (rg, grads));
+        assert_eq!(hard, spec.robustness_batch(&paths, steps, &Semantics::hard()).unwrap());
     }
 }
 

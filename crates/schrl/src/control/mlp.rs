@@ -51,7 +51,7 @@ pub fn fast_tanh(x: f32) -> f32 {
 /// `C (m×n) = A (m×k) · B (k×n) + beta · C`, with row/column strides for A and B and
 /// C row-major. Bounds are checked before the SIMD kernel runs.
 #[allow(clippy::too_many_arguments)]
-fn gemm(
+pub(crate) fn gemm(
     (m, k, n): (usize, usize, usize),
     a: &[f32],
     (rsa, csa): (usize, usize),
