@@ -150,8 +150,13 @@ impl GruOdeBackprop {
         self.at.end
     }
 
-    /// Copies the parameters from `varmap`.
-    pub fn load(&mut self, varmap: &VarMap) -> Result<()> {
+    /// Calls `f` with each parameter's variable in `varmap` and its range in the flat
+    /// vector, after checking that it exists with the expected shape.
+    fn each_var(
+        &self,
+        varmap: &VarMap,
+        mut f: impl FnMut(&candle_core::Var, &[usize], std::ops::Range<usize>) -> Result<()>,
+    ) -> Result<()> {
         let data = varmap.data().lock().expect("varmap lock");
         let mut off = 0;
         for (name, shape) in layout(&self.cfg) {
@@ -161,27 +166,31 @@ impl GruOdeBackprop {
             if var.dims() != shape.as_slice() {
                 candle_core::bail!("planner weight '{name}' has shape {:?}, expected {shape:?}", var.dims());
             }
-            let v: Vec<f32> = var.as_tensor().to_dtype(DType::F32)?.flatten_all()?.to_vec1()?;
-            self.params[off..off + v.len()].copy_from_slice(&v);
-            off += v.len();
+            let n: usize = shape.iter().product();
+            f(var, &shape, off..off + n)?;
+            off += n;
         }
         Ok(())
     }
 
+    /// Copies the parameters from `varmap`.
+    pub fn load(&mut self, varmap: &VarMap) -> Result<()> {
+        let mut params = std::mem::take(&mut self.params);
+        let r = self.each_var(varmap, |var, _, range| {
+            let v: Vec<f32> = var.as_tensor().to_dtype(DType::F32)?.flatten_all()?.to_vec1()?;
+            params[range].copy_from_slice(&v);
+            Ok(())
+        });
+        self.params = params;
+        r
+    }
+
     /// Writes the parameters into `varmap`.
     pub fn store(&self, varmap: &VarMap) -> Result<()> {
-        let data = varmap.data().lock().expect("varmap lock");
-        let mut off = 0;
-        for (name, shape) in layout(&self.cfg) {
-            let var = data
-                .get(name)
-                .ok_or_else(|| candle_core::Error::Msg(format!("no planner weight '{name}'")))?;
-            let n: usize = shape.iter().product();
-            let t = Tensor::from_slice(&self.params[off..off + n], shape.as_slice(), var.device())?;
-            var.set(&t.to_dtype(var.dtype())?)?;
-            off += n;
-        }
-        Ok(())
+        self.each_var(varmap, |var, shape, range| {
+            let t = Tensor::from_slice(&self.params[range], shape, var.device())?;
+            var.set(&t.to_dtype(var.dtype())?)
+        })
     }
 
     /// Runs the planner over `batch` paths of `steps` waypoints from `starts`

@@ -317,7 +317,7 @@ fn stagnation_restarts_reinitialise_deterministically() {
 fn hand_written_update_gradient_matches_candle_autodiff() {
     use schrl::gru_ode_backprop::{GruOdeBackprop, Source, Tape};
     use stl::Semantics;
-    let task = Task::point(TaskKind::Seq);
+    let task = Task::point(TaskKind::Loop);
     let varmap = VarMap::new();
     let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
     let cfg = PlannerConfig { dim: 2, hidden: 8, bound: 10.0, min_std: 0.1, kind: Default::default() };

@@ -59,8 +59,8 @@ pub struct TrainArgs {
     /// Dual step size of λ.
     #[arg(long, default_value_t = 0.05)]
     lambda_lr: f64,
-    /// Planner-only updates (batch 64, no execution) before joint training, stopping
-    /// once 95 % of a batch satisfies the spec; λ then restarts from 1.
+    /// Planner-only updates (batch 64, no execution) before joint training, all of them
+    /// (about 2 ms each); λ then restarts from 1.
     #[arg(long, default_value_t = 1000)]
     pretrain_updates: usize,
     /// Weight of the path-length stand-in for r_l while pre-training the planner
@@ -151,10 +151,14 @@ fn general_controller(robot: Robot, seed: u64, dir: &Path) -> Result<ControlTrai
     Ok(t)
 }
 
-/// Trains the planner alone on the spec (r_l = 0) until 95 % of a batch of 64
-/// satisfies it, then restarts λ at its initial value: the joint phase starts from
+/// Trains the planner alone on the spec for `updates` updates, with the path-length
+/// stand-in for r_l, then restarts λ at its initial value: the joint phase starts from
 /// plans that meet the spec, with the constraint slack, so the controller's return
-/// steers the planner instead of a λ inflated by the first random plans.
+/// steers the planner instead of a λ inflated by the first random plans. It does not
+/// stop at the first batch that meets the spec: once the constraint is slack the
+/// length term keeps shortening the paths (Point Seq seed 0: stopping there left a
+/// detour the controller ran out of time on, 0.018 of runs satisfied; the full 1000
+/// updates, 0.958; Cover seed 1: 0.000 → 0.996).
 fn pretrain_planner(t: &mut JointTrainer, updates: usize, length_weight: f64) -> Result<()> {
     t.plan.set_control_reward(Box::new(PathLengthReward { weight: length_weight }));
     let b = bar(updates as u64, "planner")?;
@@ -162,9 +166,6 @@ fn pretrain_planner(t: &mut JointTrainer, updates: usize, length_weight: f64) ->
         let s = t.plan.update()?;
         b.set_position(k as u64);
         b.set_message(format!("plan satisfaction {:.2}", s.satisfaction));
-        if s.satisfaction >= 0.95 {
-            break;
-        }
     }
     b.finish_and_clear();
     t.plan.set_control_reward(Box::new(NoControlReward));
