@@ -87,12 +87,14 @@ pub struct Tape {
     s: Vec<f32>,
     sigma: Vec<f32>,
     eps: Vec<f32>,
+    /// One step's `h W_hhᵀ + b_hh` and `x W_ihᵀ + b_ih`, `[batch][3 · hidden]` (scratch).
+    hidden_gh: Vec<f32>,
+    input_gi: Vec<f32>,
 }
 
 /// Buffers of the backward pass, reused across updates.
 #[derive(Clone, Debug, Default)]
 struct Work {
-    gh: Vec<f32>,
     /// Gradients of the input waypoints `[batch][steps + 1][dim]` (reparameterised term).
     gx: Vec<f32>,
     /// Hidden-state gradients of the two streams, `[2 · batch][hidden]`: rows `0..B` the
@@ -222,8 +224,10 @@ impl GruOdeBackprop {
         for v in [&mut tape.tanh_a, &mut tape.s, &mut tape.sigma, &mut tape.eps] {
             v.resize(steps * batch * d, 0.0);
         }
-        let mut hidden_gh = vec![0.0f32; batch * 3 * h];
-        let mut input_gi = vec![0.0f32; batch * 3 * h];
+        let mut hidden_gh = std::mem::take(&mut tape.hidden_gh);
+        let mut input_gi = std::mem::take(&mut tape.input_gi);
+        hidden_gh.resize(batch * 3 * h, 0.0);
+        input_gi.resize(batch * 3 * h, 0.0);
         for i in 0..steps {
             let (done, rest) = tape.hs.split_at_mut((i + 1) * batch * h);
             let h_in = &done[i * batch * h..];
@@ -284,6 +288,8 @@ impl GruOdeBackprop {
                 }
             }
         }
+        tape.hidden_gh = hidden_gh;
+        tape.input_gi = input_gi;
     }
 
     /// `log π` of each path on `tape` (the paths as data).
@@ -333,7 +339,6 @@ impl GruOdeBackprop {
         for v in [&mut w.da_sum, &mut w.ds_sum] {
             v.resize(bsz * d, 0.0);
         }
-        w.gh.resize(bsz * 3 * h, 0.0);
         for i in (0..steps).rev() {
             let h_in = &tape.hs[i * bsz * h..(i + 1) * bsz * h];
             let h_out = &tape.hs[(i + 1) * bsz * h..(i + 2) * bsz * h];

@@ -30,18 +30,25 @@ pub enum Command {
     Time(TimeArgs),
 }
 
-/// Arguments of `schrl plan time`.
+/// A trained planner and the starts to plan from: shared by `plan sample` and `plan time`.
 #[derive(clap::Args, Debug)]
-pub struct TimeArgs {
+pub struct CheckpointStarts {
     /// Checkpoint directory of a trained planner (`schrl plan train --out`).
     #[arg(long)]
     ckpt: PathBuf,
-    /// Plans to time (the paper: 100).
+    /// Starts to plan from (the paper times 100).
     #[arg(long, default_value_t = 100)]
     n: usize,
-    /// Seed of the starts and of the gradient planner's initialisations.
+    /// Seed of the starts, the sampling noise and the gradient planner's initialisations.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+}
+
+/// Arguments of `schrl plan time`.
+#[derive(clap::Args, Debug)]
+pub struct TimeArgs {
+    #[command(flatten)]
+    from: CheckpointStarts,
 }
 
 /// Arguments of `schrl plan train`.
@@ -91,15 +98,8 @@ pub struct TrainArgs {
 /// Arguments of `schrl plan sample`.
 #[derive(clap::Args, Debug)]
 pub struct SampleArgs {
-    /// Checkpoint directory.
-    #[arg(long)]
-    ckpt: PathBuf,
-    /// Paths to sample.
-    #[arg(long, default_value_t = 100)]
-    n: usize,
-    /// Seed of starts and noise.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    #[command(flatten)]
+    from: CheckpointStarts,
     /// Draw the sampled paths (at most 20) on the map to this PNG or SVG.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -215,11 +215,11 @@ fn train(args: TrainArgs) -> Result<()> {
 }
 
 fn sample(args: SampleArgs) -> Result<()> {
-    let loaded = checkpoint::load(&args.ckpt)?;
+    let loaded = checkpoint::load(&args.from.ckpt)?;
     let task = &loaded.task;
-    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
-    let g0 = task.sample_starts(&mut rng, args.n)?;
-    let noise = task.sample_noise(&mut rng, args.n)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(args.from.seed);
+    let g0 = task.sample_starts(&mut rng, args.from.n)?;
+    let noise = task.sample_noise(&mut rng, args.from.n)?;
     let paths = if args.mean {
         loaded.planner.mean_path(&g0, task.steps)?
     } else {
@@ -239,27 +239,27 @@ fn sample(args: SampleArgs) -> Result<()> {
         sim::render::save(&scene, out, args.force)?;
         println!("wrote {}", out.display());
     }
-    println!("satisfaction: {}", satisfied as f64 / args.n.max(1) as f64);
+    println!("satisfaction: {}", satisfied as f64 / args.from.n.max(1) as f64);
     Ok(())
 }
 
 fn time(args: TimeArgs) -> Result<()> {
-    if args.n == 0 {
+    if args.from.n == 0 {
         bail!("--n must be at least 1");
     }
-    let loaded = checkpoint::load(&args.ckpt)?;
+    let loaded = checkpoint::load(&args.from.ckpt)?;
     let task = &loaded.task;
     let spec = task.spec();
     let deployed = DeployedPlanner::from_varmap(&loaded.varmap, loaded.planner.config())?;
-    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(args.from.seed);
     let starts: Vec<Vec<f64>> =
-        task.sample_starts(&mut rng, args.n)?.to_dtype(candle_core::DType::F64)?.to_vec2()?;
+        task.sample_starts(&mut rng, args.from.n)?.to_dtype(candle_core::DType::F64)?.to_vec2()?;
     let hard = Semantics::hard();
 
     // The network: each plan timed alone (mean of n, as Table 5), after one warm-up.
     let (mut scratch, mut path) = (PlanScratch::default(), Vec::new());
     deployed.mean_path_into(&starts[0], task.steps, &mut scratch, &mut path);
-    let (mut net_us, mut net_ok) = (Vec::with_capacity(args.n), 0);
+    let (mut net_us, mut net_ok) = (Vec::with_capacity(args.from.n), 0);
     for s in &starts {
         let t0 = std::time::Instant::now();
         deployed.mean_path_into(s, task.steps, &mut scratch, &mut path);
@@ -267,12 +267,12 @@ fn time(args: TimeArgs) -> Result<()> {
         net_ok += (spec.robustness(&path, &hard)? > 0.0) as usize;
     }
 
-    let bar = ProgressBar::new(args.n as u64);
+    let bar = ProgressBar::new(args.from.n as u64);
     bar.set_style(
         ProgressStyle::with_template("gradient planner {bar:40} {pos}/{len}").expect("valid template"),
     );
     let cfg = GradientPlannerConfig::default();
-    let (mut grad_ms, mut grad_ok) = (Vec::with_capacity(args.n), 0);
+    let (mut grad_ms, mut grad_ok) = (Vec::with_capacity(args.from.n), 0);
     for s in &starts {
         let t0 = std::time::Instant::now();
         let p = gradient_planner::plan(task, &spec, s, &cfg, &mut rng)?;
@@ -283,11 +283,11 @@ fn time(args: TimeArgs) -> Result<()> {
     bar.finish_and_clear();
     let (nm, ns) = mean_std(&net_us);
     let (gm, gs) = mean_std(&grad_ms);
-    println!("task: {} (T = {}), {} starts", task.name, task.steps, args.n);
-    println!("network (deployed mean path): {nm:.2} ± {ns:.2} µs per plan, {net_ok}/{} satisfy", args.n);
+    println!("task: {} (T = {}), {} starts", task.name, task.steps, args.from.n);
+    println!("network (deployed mean path): {nm:.2} ± {ns:.2} µs per plan, {net_ok}/{} satisfy", args.from.n);
     println!(
         "gradient planner: {gm:.2} ± {gs:.2} ms per plan, {grad_ok}/{} satisfy (at most {} attempts of {} steps)",
-        args.n, cfg.restarts, cfg.iterations
+        args.from.n, cfg.restarts, cfg.iterations
     );
     println!("network seconds per plan: {:.3e}", nm * 1e-6);
     println!("gradient seconds per plan: {:.3e}", gm * 1e-3);
