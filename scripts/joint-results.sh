@@ -3,7 +3,9 @@
 # general controller, planner pre-training, 3 M joint steps, 5 × 100 evaluation
 # runs) over seeds, printing one line per run and a mean ± std over seeds per task
 # (README, "Joint training results").
-# Usage: [TASKS="seq cover"] [EXTRA="--planner mlp"] scripts/joint-results.sh [OUT_DIR] [SEEDS...]
+# Usage: [TASKS="seq cover"] [EXTRA="--planner mlp"] [SCHRL_BIN=path] scripts/joint-results.sh [OUT_DIR] [SEEDS...]
+# (SCHRL_BIN: run that binary instead of building target/release/schrl, e.g. a copy
+# that stays put while the tree changes)
 # (defaults: all five tasks, runs/joint, seeds 0 1 2)
 set -euo pipefail
 out=${1:-runs/joint}
@@ -11,7 +13,11 @@ shift || true
 seeds=("${@:-0 1 2}")
 read -r -a seeds <<<"${seeds[*]}"
 export RAYON_NUM_THREADS=1
-cargo build --release -q -p schrl-cli
+bin=${SCHRL_BIN:-}
+if [[ -z "$bin" ]]; then
+  cargo build --release -q -p schrl-cli
+  bin=./target/release/schrl
+fi
 source "$(dirname "${BASH_SOURCE[0]}")/summary.sh"
 read -r -a tasks <<<"${TASKS:-seq cover branch loop signal}"
 read -r -a extra <<<"${EXTRA:-}"
@@ -20,7 +26,7 @@ for task in "${tasks[@]}"; do
   for seed in "${seeds[@]}"; do
     dir="$out/point-$task-$seed"
     start=$(date +%s.%N)
-    result=$(./target/release/schrl train --robot point --task "$task" --seed "$seed" "${extra[@]}" --out "$dir" --force)
+    result=$("$bin" train --robot point --task "$task" --seed "$seed" "${extra[@]}" --out "$dir" --force)
     end=$(date +%s.%N)
     sat=$(grep '^satisfaction:' <<<"$result" | awk '{print $2}')
     steps=$(grep '^steps to reach:' <<<"$result" | awk '{print $4}')

@@ -61,6 +61,13 @@ pub enum Method {
 pub trait ControlReward {
     /// One reward per path of `paths` (`batch × (steps+1) × dim`, row-major).
     fn reward(&self, paths: &[f64], steps: usize, dim: usize) -> Vec<f64>;
+
+    /// Adds `∂ r_l / ∂ paths` into `out` (same layout as `paths`) when the reward is
+    /// a known differentiable function of the path: the hand-written GRU-ODE update
+    /// then also follows it pathwise, beside the score function (which sees it through
+    /// `r_h`, as for any reward; the candle-trained ablation planners only that way).
+    /// Default: nothing (a reward measured by running a controller has no gradient).
+    fn add_gradient(&self, _paths: &[f64], _steps: usize, _dim: usize, _out: &mut [f64]) {}
 }
 
 /// `r_l = 0`: the planner sees only the spec.
@@ -93,6 +100,30 @@ impl ControlReward for PathLengthReward {
                 -self.weight * len
             })
             .collect()
+    }
+
+    /// Pathwise, the length pulls each waypoint towards its neighbours. The score
+    /// function alone left a local optimum in place (Point Branch seed 0: a first
+    /// waypoint 8 m out, around the cross, which no small change of the sampled
+    /// paths shortened without crossing a wall).
+    fn add_gradient(&self, paths: &[f64], steps: usize, dim: usize, out: &mut [f64]) {
+        let n = paths.len() / dim;
+        for k in 1..n {
+            // Segments never join two paths: skip where a path starts.
+            if k % (steps + 1) == 0 {
+                continue;
+            }
+            let (a, b) = (&paths[(k - 1) * dim..k * dim], &paths[k * dim..(k + 1) * dim]);
+            let len = a.iter().zip(b).map(|(x, y)| (y - x) * (y - x)).sum::<f64>().sqrt();
+            if len < 1e-9 {
+                continue;
+            }
+            for d in 0..dim {
+                let g = self.weight * (b[d] - a[d]) / len;
+                out[k * dim + d] -= g;
+                out[(k - 1) * dim + d] += g;
+            }
+        }
     }
 }
 
@@ -438,7 +469,9 @@ impl PlanTrainer {
         let w = self.cfg.pg_weight;
         let score: Vec<f32> = adv.iter().map(|a| (w * a / b as f64) as f32).collect();
         let lambda = if self.cfg.method == Method::Cpg { self.lagrangian.lambda } else { 0.0 };
-        let drho: Vec<f32> = drho.iter().map(|g| (g * lambda / b as f64) as f32).collect();
+        let mut total: Vec<f64> = drho.iter().map(|g| g * lambda).collect();
+        self.control.add_gradient(paths, self.task.steps, self.task.map.dim(), &mut total);
+        let drho: Vec<f32> = total.iter().map(|g| (g / b as f64) as f32).collect();
         let f = self.fast.as_mut().expect("fast update");
         let FastUpdate { net, tape, adam, grad } = f;
         net.backward(tape, &drho, &score, grad);
@@ -477,11 +510,24 @@ impl PlanTrainer {
     /// own generator (the same `n` starts on every call), so checking does not shift
     /// the training samples.
     pub fn mean_satisfaction(&self, n: usize) -> Result<f64> {
+        let hard = self.hard_robustness(&self.validation_paths(n)?)?;
+        Ok(fraction_satisfied(&hard))
+    }
+
+    /// Mean length (metres, start to last waypoint) of the mean paths from the `n`
+    /// validation starts of [`PlanTrainer::mean_satisfaction`].
+    pub fn mean_path_length(&self, n: usize) -> Result<f64> {
+        let paths = self.validation_paths(n)?;
+        let flat: Vec<f64> = paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
+        let dim = self.task.map.dim();
+        let r = PathLengthReward { weight: 1.0 }.reward(&flat, self.task.steps, dim);
+        Ok(-r.iter().sum::<f64>() / n.max(1) as f64)
+    }
+
+    fn validation_paths(&self, n: usize) -> Result<Tensor> {
         let mut rng = ChaCha8Rng::seed_from_u64(self.cfg.seed ^ 0x7A11_DA7E);
         let g0 = self.task.sample_starts(&mut rng, n)?;
-        let paths = self.planner.mean_path(&g0, self.task.steps)?;
-        let hard = self.hard_robustness(&paths)?;
-        Ok(fraction_satisfied(&hard))
+        self.planner.mean_path(&g0, self.task.steps)
     }
 
     /// Fraction of `n` freshly sampled paths that satisfy the spec (hard ρ > 0).

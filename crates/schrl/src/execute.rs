@@ -4,10 +4,11 @@
 //! A run follows the waypoints in order: the environment's goal is the current
 //! waypoint; on reaching it (the robot's reach radius) the next one becomes the goal.
 //! The run ends when the last waypoint is reached (completed), on a collision, or at
-//! the task's step limit. It satisfies the task when it completed and the spec holds
-//! on the *executed* path: the start followed by the robot's positions at the moments
-//! it reached each waypoint. Steps to reach: environment steps until the last
-//! waypoint was reached.
+//! the task's step limit. It satisfies the task when it completed (so its whole
+//! trajectory was collision-free) and the spec holds on the *executed* path: the start
+//! followed by the robot's positions at the moments it reached each waypoint, with
+//! `safe` checked at those positions ([`crate::tasks::Task::execution_spec`]). Steps to
+//! reach: environment steps until the last waypoint was reached.
 
 use serde::{Deserialize, Serialize};
 use sim::{Env, Step};

@@ -39,11 +39,23 @@ pub struct JointConfig {
     pub freeze_planner: bool,
     /// Keep the controller fixed (it then acts with its mean action).
     pub freeze_controller: bool,
+    /// The planner plans for the task with goal discs shrunk by this much (metres;
+    /// see [`Task::with_goal_margin`]), usually the controller's reach radius, so the
+    /// positions where waypoints count as reached lie in the goals. Satisfaction is
+    /// judged on the task's own goals. Runs saved before it existed used 0.
+    #[serde(default)]
+    pub goal_margin: f64,
 }
 
 impl Default for JointConfig {
     fn default() -> Self {
-        Self { plan_batch: 8, control_weight: 0.05, freeze_planner: false, freeze_controller: false }
+        Self {
+            plan_batch: 8,
+            control_weight: 0.05,
+            freeze_planner: false,
+            freeze_controller: false,
+            goal_margin: 0.0,
+        }
     }
 }
 
@@ -123,7 +135,13 @@ impl JointTrainer {
         if config.plan_batch == 0 {
             return Err(crate::control::ControlError::Config("plan_batch must be at least 1".into()));
         }
-        let plan = PlanTrainer::new(task.clone(), cpg)
+        if !(config.goal_margin >= 0.0 && config.goal_margin.is_finite()) {
+            return Err(crate::control::ControlError::Config(format!(
+                "goal_margin must be a non-negative number of metres, got {}",
+                config.goal_margin
+            )));
+        }
+        let plan = PlanTrainer::new(task.with_goal_margin(config.goal_margin), cpg)
             .map_err(|e| crate::control::ControlError::Config(format!("planner: {e}")))?;
         let envs = (0..config.plan_batch)
             .map(|_| sim::make_env(robot, task.map.clone()))
@@ -200,7 +218,8 @@ impl JointTrainer {
         paths: &[Vec<Vec<f64>>],
         learn: bool,
     ) -> Result<Vec<Execution>, crate::control::ControlError> {
-        let spec = self.plan.task().spec();
+        // Judged on the task's own goals, not the planner's shrunk ones.
+        let spec = self.task.execution_spec();
         let c = &mut self.control;
         let (od, ad) = (c.policy.obs_dim(), c.policy.act_dim());
         let n = paths.len();
@@ -392,7 +411,7 @@ pub fn evaluate_task(
     seed: u64,
 ) -> Result<TaskEval, crate::control::ControlError> {
     let cerr = |e: candle_core::Error| crate::control::ControlError::Config(format!("planner: {e}"));
-    let spec = task.spec();
+    let spec = task.execution_spec();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut eval = TaskEval {
         satisfaction: vec![],

@@ -358,6 +358,22 @@ impl Task {
         })
     }
 
+    /// The task with every goal disc shrunk by `margin`, at most a third of its
+    /// radius: the task a planner plans for when a controller counts a waypoint as
+    /// reached anywhere within `margin` of it. A waypoint deep in the disc keeps the
+    /// reach circle (mostly) inside the goal, so the spec holds on the positions the
+    /// robot actually reached (Point Loop: plans into the 0.6 m corner discs, reached
+    /// within the 0.3 m reach radius, failed the spec on what the robot did; issue 7).
+    /// The cap keeps plans trainable: Point Loop seed 0, 3000 planner updates, shrunk
+    /// by 0.3 m never satisfied a batch; by 0.2 m, 96 % of sampled plans after 1500.
+    pub fn with_goal_margin(&self, margin: f64) -> Task {
+        let mut t = self.clone();
+        for g in &mut t.goals {
+            g.radius -= margin.clamp(0.0, g.radius / 3.0);
+        }
+        t
+    }
+
     /// The parsed formula.
     pub fn formula(&self) -> Formula {
         self.formula.clone()
@@ -401,6 +417,16 @@ impl Task {
             .fold(Spec::builder(self.formula()).state_dim(dim), |b, (n, p)| b.bind_shared(n, p))
             .build()
             .expect("task names are checked when the task is loaded")
+    }
+
+    /// The spec a run is judged by ([`crate::execute`]): the task's spec with `safe`
+    /// at the executed path's states only. The straight segments between the
+    /// positions where waypoints were reached are not what the robot drove; its
+    /// actual trajectory is checked for collisions at every step, which is stronger.
+    /// (Point Branch seed 2: 28 % of collision-free runs that reached every waypoint
+    /// failed the segment check where the reached positions cut a door's corner.)
+    pub fn execution_spec(&self) -> Spec {
+        Task { safe_along: SafeAlong::Waypoints, ..self.clone() }.spec()
     }
 
     /// The spec for batches of paths as tensors (differentiable in candle).

@@ -118,3 +118,20 @@ fn a_task_for_another_robot_is_refused() {
             .to_string();
     assert!(err.contains("the task is for the point but the controller drives the car"), "{err}");
 }
+
+#[test]
+fn reached_positions_that_cut_a_wall_corner_do_not_fail_a_collision_free_run() {
+    // Regression (issue 7, Point Branch seed 2): the straight segment between two
+    // positions where waypoints were reached is not what the robot drove (its
+    // trajectory is checked for collisions at every step), so a run is judged with
+    // `safe` at those positions only.
+    let task = Task::point(TaskKind::Seq);
+    let mut executed = vec![vec![1.5, -1.5]];
+    executed.extend(
+        [[2.1, 2.0], [2.0, 1.9], [-0.9, 2.0], [-0.55, 1.85], [-1.65, -0.7], [-2.0, -1.1]].map(Vec::from),
+    );
+    executed.extend([[1.1, -2.0], [1.0, -1.9]].map(Vec::from));
+    // (-0.55, 1.85) -> (-1.65, -0.7) clips the wall centred at (-1, 0).
+    assert!(executed_robustness(&task.spec(), &executed, task.steps) < 0.0);
+    assert!(executed_robustness(&task.execution_spec(), &executed, task.steps) > 0.0);
+}
