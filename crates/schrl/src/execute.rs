@@ -44,6 +44,7 @@ pub struct WaypointDispatcher {
     next: usize,
     limit: usize,
     reached: Vec<Vec<f64>>,
+    reached_at: Vec<usize>,
     outcome: Option<Outcome>,
     steps: usize,
 }
@@ -53,7 +54,7 @@ impl WaypointDispatcher {
     /// most `limit` environment steps.
     pub fn new(start: Vec<f64>, waypoints: Vec<Vec<f64>>, limit: usize) -> Self {
         let outcome = waypoints.is_empty().then_some(Outcome::Completed);
-        Self { waypoints, next: 0, limit, reached: vec![start], outcome, steps: 0 }
+        Self { waypoints, next: 0, limit, reached: vec![start], reached_at: vec![], outcome, steps: 0 }
     }
 
     /// The waypoint being driven to.
@@ -69,6 +70,7 @@ impl WaypointDispatcher {
         self.steps += 1;
         if step.reached {
             self.reached.push(position.to_vec());
+            self.reached_at.push(self.steps);
             self.next += 1;
             if self.next == self.waypoints.len() {
                 self.outcome = Some(Outcome::Completed);
@@ -105,6 +107,11 @@ impl WaypointDispatcher {
         self.steps
     }
 
+    /// Environment steps taken when each waypoint was reached, in order.
+    pub fn reached_at(&self) -> &[usize] {
+        &self.reached_at
+    }
+
     /// Waypoints reached so far.
     pub fn reached_count(&self) -> usize {
         self.reached.len() - 1
@@ -124,6 +131,9 @@ pub struct Execution {
     pub outcome: Outcome,
     /// Environment steps taken.
     pub steps: usize,
+    /// Environment steps taken when each waypoint was reached, in order.
+    #[serde(default)]
+    pub reached_at: Vec<usize>,
     /// Sum of the environment's rewards (distance progress plus reach bonuses).
     pub control_return: f64,
     /// Hard robustness of the executed path (−∞ when it did not complete).
@@ -134,6 +144,16 @@ impl Execution {
     /// Completed, and the spec holds on the executed path.
     pub fn satisfied(&self) -> bool {
         self.outcome == Outcome::Completed && self.robustness > 0.0
+    }
+
+    /// Environment steps until `waypoints` waypoints were reached (`None`: all of
+    /// them; see [`crate::tasks::Task::steps_to_reach_at`]), if they were.
+    pub fn steps_to_reach(&self, waypoints: Option<usize>) -> Option<usize> {
+        match waypoints {
+            None if self.outcome == Outcome::Completed => Some(self.steps),
+            None => None,
+            Some(n) => n.checked_sub(1).and_then(|i| self.reached_at.get(i)).copied(),
+        }
     }
 }
 

@@ -203,7 +203,7 @@ impl JointTrainer {
             plan_satisfaction: hard.iter().filter(|r| **r > 0.0).count() as f64 / n,
             satisfaction: sat.len() as f64 / n,
             steps_to_reach: (!sat.is_empty())
-                .then(|| sat.iter().map(|r| r.steps as f64).sum::<f64>() / sat.len() as f64),
+                .then(|| sat.iter().map(|r| reach_steps(r, &self.task)).sum::<f64>() / sat.len() as f64),
             lambda: self.plan.lagrangian().lambda,
             plan_loss,
             control,
@@ -337,6 +337,7 @@ impl JointTrainer {
                 trajectory: run.trajectory,
                 outcome,
                 steps: run.dispatcher.steps(),
+                reached_at: run.dispatcher.reached_at().to_vec(),
                 control_return: run.control_return,
             });
         }
@@ -350,6 +351,11 @@ fn normalize(on: bool, rms: &crate::control::normalize::RunningMeanStd, raw: &[f
     } else {
         out.iter_mut().zip(raw).for_each(|(o, r)| *o = *r as f32);
     }
+}
+
+/// Steps to reach of a satisfying run under `task`'s count.
+fn reach_steps(run: &Execution, task: &Task) -> f64 {
+    run.steps_to_reach(task.steps_to_reach_at).unwrap_or(run.steps) as f64
 }
 
 /// A `[n, T+1, dim]` tensor as nested vectors.
@@ -430,7 +436,7 @@ pub fn evaluate_task(
             PlanChoice::Sampled => planner.sample(&g0, &noise).map(|b| b.paths),
         };
         let paths = paths_of(&planned.map_err(cerr)?).map_err(cerr)?;
-        let (mut sat, mut steps) = (0usize, 0usize);
+        let (mut sat, mut steps) = (0usize, 0.0f64);
         for path in &paths {
             let mut env = sim::make_env(controller.robot, task.map.clone())?;
             let od = env.observation_space().dim();
@@ -464,6 +470,7 @@ pub fn evaluate_task(
                 trajectory,
                 outcome,
                 steps: d.steps(),
+                reached_at: d.reached_at().to_vec(),
                 control_return: ret,
             };
             match outcome {
@@ -474,7 +481,7 @@ pub fn evaluate_task(
             }
             if run.satisfied() {
                 sat += 1;
-                steps += run.steps;
+                steps += reach_steps(&run, task);
             }
             if eval.examples.len() < 6 {
                 eval.examples.push(run);
@@ -482,7 +489,7 @@ pub fn evaluate_task(
         }
         eval.satisfaction.push(sat as f64 / per_group as f64);
         if sat > 0 {
-            eval.steps_to_reach.push(steps as f64 / sat as f64);
+            eval.steps_to_reach.push(steps / sat as f64);
         }
     }
     Ok(eval)

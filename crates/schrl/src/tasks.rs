@@ -145,6 +145,10 @@ pub struct Task {
     pub safe_along: SafeAlong,
     /// Waypoint index from which the Signal task's counter holds.
     pub counter_from: Option<usize>,
+    /// Steps to reach count environment steps until this many waypoints were reached
+    /// (default: all). Loop: 10, as the paper reports Loop "when it cumulatively
+    /// achieves the given goals ten times" (§4.3). Satisfaction still needs every one.
+    pub steps_to_reach_at: Option<usize>,
     /// The TOML text it was loaded from (kept so runs can store their task).
     pub toml: String,
 }
@@ -173,6 +177,7 @@ struct TaskToml {
     #[serde(default)]
     safe_along: SafeAlong,
     counter_from: Option<usize>,
+    steps_to_reach_at: Option<usize>,
     start: StartToml,
     goal: Vec<GoalRegion>,
 }
@@ -278,6 +283,11 @@ impl Task {
         if t.step_limit == 0 {
             return Err(bad("step_limit: must be at least 1".into()));
         }
+        if let Some(n) = t.steps_to_reach_at
+            && !(1..=t.steps).contains(&n)
+        {
+            return Err(bad(format!("steps_to_reach_at: {n} is not a waypoint count in 1..={}", t.steps)));
+        }
         if !(t.safe_radius >= 0.0 && t.safe_radius.is_finite()) {
             return Err(bad(format!("safe_radius: {} is not a non-negative number", t.safe_radius)));
         }
@@ -354,6 +364,7 @@ impl Task {
             safe_radius: t.safe_radius,
             safe_along: t.safe_along,
             counter_from: t.counter_from,
+            steps_to_reach_at: t.steps_to_reach_at,
             toml: toml_text.to_string(),
         })
     }

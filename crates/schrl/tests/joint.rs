@@ -22,6 +22,7 @@ fn dispatcher_advances_finishes_times_out_and_stops_on_collision() {
     assert_eq!(d.after_step(&step(true, false), &[1.8, 0.1]), Dispatch::Done(Outcome::Completed));
     assert_eq!(d.executed_path(), &[vec![0.0, 0.0], vec![0.9, 0.0], vec![1.8, 0.1]]);
     assert_eq!((d.steps(), d.outcome()), (3, Some(Outcome::Completed)));
+    assert_eq!(d.reached_at(), &[2, 3]);
     // Further steps change nothing.
     assert_eq!(d.after_step(&step(false, true), &[0.0, 0.0]), Dispatch::Done(Outcome::Completed));
 
@@ -72,9 +73,14 @@ fn satisfaction_is_judged_on_the_executed_path() {
         trajectory: vec![],
         outcome,
         steps: 100,
+        reached_at: (1..=8).map(|k| 10 * k).collect(),
         control_return: 0.0,
     };
     assert!(run(Outcome::Completed, good.clone()).satisfied());
+    // Steps to reach: to the last waypoint, or to a task's count (Loop: the tenth).
+    assert_eq!(run(Outcome::Completed, good.clone()).steps_to_reach(None), Some(100));
+    assert_eq!(run(Outcome::Completed, good.clone()).steps_to_reach(Some(3)), Some(30));
+    assert_eq!(run(Outcome::TimedOut, good.clone()).steps_to_reach(None), None);
     assert!(!run(Outcome::Collided, good.clone()).satisfied());
     assert!(!run(Outcome::Completed, swapped).satisfied());
 }

@@ -95,6 +95,11 @@ fn malformed_tasks_name_the_file_and_the_problem() {
         (GOOD.to_string(), "F[1,5] home", "looks at waypoint 5, but the plan has 2"),
         (GOOD.to_string(), "F home", "unbounded"),
         (GOOD.replace("name = \"home\"", "name = \"safe\""), "F[1,2] safe", "not a usable predicate name"),
+        (
+            GOOD.replace("steps = 2", "steps = 2\nsteps_to_reach_at = 3"),
+            "F[1,2] home",
+            "steps_to_reach_at: 3 is not a waypoint count in 1..=2",
+        ),
     ];
     for (toml_text, spec, expected) in cases {
         let err = load(&toml_text, spec).err().unwrap_or_else(|| panic!("accepted: {spec}")).to_string();
@@ -151,4 +156,23 @@ fn an_unknown_safe_along_is_named() {
         load(&GOOD.replace("safe_radius = 0.1", "safe_radius = 0.1\nsafe_along = \"edges\""), "G[1,2] safe")
             .unwrap_err();
     assert!(e.to_string().contains("edges") && e.to_string().contains("line 9"), "{e}");
+}
+
+#[test]
+fn a_goal_margin_shrinks_each_goal_by_at_most_a_third_and_keeps_the_rest() {
+    let t = Task::point(TaskKind::Loop);
+    let shrunk = t.with_goal_margin(0.3);
+    // Loop's corners have radius 0.6: capped at 0.2.
+    assert!(shrunk.goals.iter().all(|g| (g.radius - 0.4).abs() < 1e-12));
+    assert!(t.with_goal_margin(0.1).goals.iter().all(|g| (g.radius - 0.5).abs() < 1e-12));
+    assert_eq!((shrunk.steps, shrunk.step_limit, &shrunk.spec), (t.steps, t.step_limit, &t.spec));
+    // A waypoint 0.45 m from a corner's centre satisfies the task, not the shrunk one.
+    let mut path = vec![vec![1.5, -1.5]];
+    for k in 0..t.steps {
+        path.push(if k % 2 == 0 { vec![2.0, 2.0 - 0.45] } else { vec![2.0, -2.0 + 0.45] });
+    }
+    let flat: Vec<f64> = path.into_iter().flatten().collect();
+    let hard = stl::Semantics::hard();
+    assert!(t.spec().robustness(&flat, &hard).unwrap() > 0.0);
+    assert!(shrunk.spec().robustness(&flat, &hard).unwrap() < 0.0);
 }

@@ -165,7 +165,8 @@ fn general_controller(robot: Robot, seed: u64, dir: &Path) -> Result<ControlTrai
 /// Trains `candidates` planners alone on the spec (the run's seed, then seeds derived
 /// from it), `updates` updates each with the path-length stand-in for r_l, and keeps
 /// the best: among those whose mean paths satisfy the spec from ≥ 95 % of validation
-/// starts, the shortest; else the most satisfying. λ then restarts at its initial
+/// starts, the shortest; else the most satisfying. While none satisfies, more
+/// candidates follow, up to three times as many. λ then restarts at its initial
 /// value: the joint phase starts from plans that meet the spec, with the constraint
 /// slack, so the controller's return steers the planner instead of a λ inflated by
 /// the first random plans. Each candidate uses its whole budget: once the constraint
@@ -182,9 +183,18 @@ fn pretrain_planner(
     length_weight: f64,
 ) -> Result<()> {
     const VALIDATION_STARTS: usize = 200;
+    // While no candidate satisfies, up to this many times `candidates` are tried
+    // (Point Loop seed 1: none of the first 3 met the shrunk corner discs).
+    const EXTRA_ROUNDS: usize = 3;
     let b = bar((updates * candidates) as u64, "planner")?;
     let mut best: Option<(PlanTrainer, f64, f64)> = None;
-    for k in 0..candidates {
+    let satisfying =
+        |best: &Option<(PlanTrainer, f64, f64)>| best.as_ref().is_some_and(|(_, s, _)| *s >= 0.95);
+    for k in 0..candidates * EXTRA_ROUNDS {
+        if k >= candidates && satisfying(&best) {
+            break;
+        }
+        b.set_length((updates * (k + 1).max(candidates)) as u64);
         let cfg =
             CpgConfig { seed: t.plan.config().seed.wrapping_add(k as u64 * 1_000_003), ..*t.plan.config() };
         let mut plan = PlanTrainer::new(t.plan.task().clone(), cfg)?;
