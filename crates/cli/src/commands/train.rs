@@ -183,15 +183,17 @@ fn pretrain_planner(
     length_weight: f64,
 ) -> Result<()> {
     const VALIDATION_STARTS: usize = 200;
+    // A candidate satisfies when its mean paths do from this fraction of the starts.
+    const SATISFYING: f64 = 0.95;
     // While no candidate satisfies, up to this many times `candidates` are tried
     // (Point Loop seed 1: none of the first 3 met the shrunk corner discs).
     const EXTRA_ROUNDS: usize = 3;
     let b = bar((updates * candidates) as u64, "planner")?;
+    // The kept planner with its validation satisfaction and mean path length.
     let mut best: Option<(PlanTrainer, f64, f64)> = None;
-    let satisfying =
-        |best: &Option<(PlanTrainer, f64, f64)>| best.as_ref().is_some_and(|(_, s, _)| *s >= 0.95);
     for k in 0..candidates * EXTRA_ROUNDS {
-        if k >= candidates && satisfying(&best) {
+        let best_sat = best.as_ref().map_or(0.0, |(_, s, _)| *s);
+        if k >= candidates && best_sat >= SATISFYING {
             break;
         }
         b.set_length((updates * (k + 1).max(candidates)) as u64);
@@ -202,17 +204,13 @@ fn pretrain_planner(
         for i in 1..=updates {
             let s = plan.update()?;
             b.set_position((k * updates + i) as u64);
-            b.set_message(format!(
-                "candidate {}/{candidates}: plan satisfaction {:.2}",
-                k + 1,
-                s.satisfaction
-            ));
+            b.set_message(format!("candidate {}: plan satisfaction {:.2}", k + 1, s.satisfaction));
         }
         let (sat, len) =
             (plan.mean_satisfaction(VALIDATION_STARTS)?, plan.mean_path_length(VALIDATION_STARTS)?);
         let better = match &best {
             None => true,
-            Some((_, s, l)) if sat >= 0.95 && *s >= 0.95 => len < *l,
+            Some((_, s, l)) if sat >= SATISFYING && *s >= SATISFYING => len < *l,
             Some((_, s, _)) => sat > *s,
         };
         if better {
