@@ -116,6 +116,29 @@ impl WaypointDispatcher {
     pub fn reached_count(&self) -> usize {
         self.reached.len() - 1
     }
+
+    /// The run as an [`Execution`] judged by `spec` (the task's
+    /// [`crate::tasks::Task::execution_spec`]; `steps`: the task's waypoints after the
+    /// start). A run not yet over counts as timed out.
+    pub fn into_execution(
+        self,
+        spec: &stl::Spec,
+        steps: usize,
+        planned: Vec<Vec<f64>>,
+        trajectory: Vec<Vec<f64>>,
+        control_return: f64,
+    ) -> Execution {
+        Execution {
+            planned,
+            robustness: executed_robustness(spec, &self.reached, steps),
+            outcome: self.outcome.unwrap_or(Outcome::TimedOut),
+            steps: self.steps,
+            executed: self.reached,
+            trajectory,
+            reached_at: self.reached_at,
+            control_return,
+        }
+    }
 }
 
 /// One executed plan.

@@ -22,7 +22,7 @@ use crate::control::policy::PolicyCache;
 use crate::control::ppo::{RolloutBuffer, UpdateStats as PpoStats};
 use crate::control::{ControlTrainer, Controller};
 use crate::cpg::{CpgConfig, PlanTrainer};
-use crate::execute::{Dispatch, Execution, Outcome, executed_robustness, start_run};
+use crate::execute::{Dispatch, Execution, Outcome, start_run};
 use crate::planner::PathPlanner;
 use crate::tasks::Task;
 
@@ -45,6 +45,12 @@ pub struct JointConfig {
     /// judged on the task's own goals. Runs saved before it existed used 0.
     #[serde(default)]
     pub goal_margin: f64,
+    /// The planner plans for the task with `safe` keeping this much more clearance
+    /// (metres; see [`Task::with_safe_margin`]), room for the controller's curves.
+    /// Collisions are judged on the robot's trajectory. Runs saved before it existed
+    /// used 0.
+    #[serde(default)]
+    pub safe_margin: f64,
 }
 
 impl Default for JointConfig {
@@ -55,6 +61,7 @@ impl Default for JointConfig {
             freeze_planner: false,
             freeze_controller: false,
             goal_margin: 0.0,
+            safe_margin: 0.0,
         }
     }
 }
@@ -135,13 +142,15 @@ impl JointTrainer {
         if config.plan_batch == 0 {
             return Err(crate::control::ControlError::Config("plan_batch must be at least 1".into()));
         }
-        if !(config.goal_margin >= 0.0 && config.goal_margin.is_finite()) {
-            return Err(crate::control::ControlError::Config(format!(
-                "goal_margin must be a non-negative number of metres, got {}",
-                config.goal_margin
-            )));
+        for (key, metres) in [("goal_margin", config.goal_margin), ("safe_margin", config.safe_margin)] {
+            if !(metres >= 0.0 && metres.is_finite()) {
+                return Err(crate::control::ControlError::Config(format!(
+                    "{key} must be a non-negative number of metres, got {metres}"
+                )));
+            }
         }
-        let plan = PlanTrainer::new(task.with_goal_margin(config.goal_margin), cpg)
+        let planned = task.with_goal_margin(config.goal_margin).with_safe_margin(config.safe_margin);
+        let plan = PlanTrainer::new(planned, cpg)
             .map_err(|e| crate::control::ControlError::Config(format!("planner: {e}")))?;
         let envs = (0..config.plan_batch)
             .map(|_| sim::make_env(robot, task.map.clone()))
@@ -329,17 +338,13 @@ impl JointTrainer {
                 self.buffer.rewards.extend(rewards);
                 self.buffer.ends.extend((0..len).map(|k| k + 1 == len));
             }
-            let executed = run.dispatcher.executed_path().to_vec();
-            out.push(Execution {
-                planned: paths[i].clone(),
-                robustness: executed_robustness(&spec, &executed, self.task.steps),
-                executed,
-                trajectory: run.trajectory,
-                outcome,
-                steps: run.dispatcher.steps(),
-                reached_at: run.dispatcher.reached_at().to_vec(),
-                control_return: run.control_return,
-            });
+            out.push(run.dispatcher.into_execution(
+                &spec,
+                self.task.steps,
+                paths[i].clone(),
+                run.trajectory,
+                run.control_return,
+            ));
         }
         Ok(out)
     }
@@ -445,35 +450,18 @@ pub fn evaluate_task(
             let mut trajectory = vec![path[0].clone()];
             let mut action = vec![0.0; env.action_space().dim()];
             let mut ret = 0.0;
-            let outcome = loop {
-                if let Some(o) = d.outcome() {
-                    break o;
-                }
+            while d.outcome().is_none() {
                 controller.act(&obs, 1, &mut cache, &mut action);
                 let s = env.step_into(&action, &mut obs)?;
                 ret += s.reward;
                 trajectory.push(env.position().to_vec());
-                match d.after_step(&s, env.position()) {
-                    Dispatch::Continue => {}
-                    Dispatch::NewGoal(g) => {
-                        env.set_goal(&g)?;
-                        env.observe(&mut obs);
-                    }
-                    Dispatch::Done(o) => break o,
+                if let Dispatch::NewGoal(g) = d.after_step(&s, env.position()) {
+                    env.set_goal(&g)?;
+                    env.observe(&mut obs);
                 }
-            };
-            let executed = d.executed_path().to_vec();
-            let run = Execution {
-                planned: path.clone(),
-                robustness: executed_robustness(&spec, &executed, task.steps),
-                executed,
-                trajectory,
-                outcome,
-                steps: d.steps(),
-                reached_at: d.reached_at().to_vec(),
-                control_return: ret,
-            };
-            match outcome {
+            }
+            let run = d.into_execution(&spec, task.steps, path.clone(), trajectory, ret);
+            match run.outcome {
                 Outcome::Collided => eval.collisions += 1,
                 Outcome::Fell => eval.falls += 1,
                 Outcome::TimedOut => eval.timeouts += 1,

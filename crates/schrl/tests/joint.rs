@@ -126,6 +126,32 @@ fn a_task_for_another_robot_is_refused() {
 }
 
 #[test]
+fn negative_or_infinite_planning_margins_are_refused_by_name() {
+    for (cfg, key) in [
+        (JointConfig { goal_margin: -0.1, ..JointConfig::default() }, "goal_margin"),
+        (JointConfig { safe_margin: f64::INFINITY, ..JointConfig::default() }, "safe_margin"),
+    ] {
+        let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
+        let err = JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(err.contains(key) && err.contains("non-negative"), "{err}");
+    }
+    let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
+    let cfg = JointConfig { safe_margin: 0.15, ..JointConfig::default() };
+    let t = JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control).unwrap();
+    assert!(
+        (t.plan.task().safe_radius - (t.task.safe_radius + 0.15)).abs() < 1e-12,
+        "the planner plans wider"
+    );
+    assert!(
+        (t.task.safe_radius - Task::point(TaskKind::Seq).safe_radius).abs() < 1e-12,
+        "runs are judged as written"
+    );
+}
+
+#[test]
 fn reached_positions_that_cut_a_wall_corner_do_not_fail_a_collision_free_run() {
     // Regression (issue 7, Point Branch seed 2): the straight segment between two
     // positions where waypoints were reached is not what the robot drove (its

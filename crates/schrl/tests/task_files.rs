@@ -176,3 +176,26 @@ fn a_goal_margin_shrinks_each_goal_by_at_most_a_third_and_keeps_the_rest() {
     assert!(t.spec().robustness(&flat, &hard).unwrap() > 0.0);
     assert!(shrunk.spec().robustness(&flat, &hard).unwrap() < 0.0);
 }
+
+#[test]
+fn a_safe_margin_widens_the_clearance_planned_and_keeps_the_goals() {
+    let t = Task::point(TaskKind::Loop);
+    // Back and forth along x = 2.4 between the right-hand corners: 0.35 m from the
+    // end of the right wall (x = 2.75), which the robot's 0.1 m radius clears.
+    let mut path = vec![vec![1.5, -1.5]];
+    for k in 0..t.steps {
+        path.push(if k % 2 == 0 { vec![2.4, 1.6] } else { vec![2.4, -1.6] });
+    }
+    let flat: Vec<f64> = path.into_iter().flatten().collect();
+    let hard = stl::Semantics::hard();
+    let rho = |task: &Task| task.spec().robustness(&flat, &hard).unwrap();
+    assert!(rho(&t) > 0.0);
+    assert!(rho(&t.with_safe_margin(0.2)) > 0.0, "0.1 + 0.2 m of clearance is met");
+    assert!(rho(&t.with_safe_margin(0.3)) < 0.0, "0.1 + 0.3 m of clearance is not");
+    let wide = t.with_safe_margin(0.3);
+    assert_eq!((wide.goals.len(), wide.steps, wide.step_limit), (t.goals.len(), t.steps, t.step_limit));
+    assert!(
+        (t.with_safe_margin(-1.0).safe_radius - t.safe_radius).abs() < 1e-12,
+        "a negative margin is none"
+    );
+}
