@@ -170,7 +170,7 @@ fn general_controller(robot: Robot, seed: u64, dir: &Path) -> Result<ControlTrai
 
 /// Trains `candidates` planners alone on the spec (the run's seed, then seeds derived
 /// from it), `updates` updates each with the path-length stand-in for r_l, and keeps
-/// the best: among those whose mean paths satisfy the spec from ≥ 95 % of validation
+/// the best: among those whose mean paths satisfy the spec from ≥ 99 % of validation
 /// starts, the shortest; else the most satisfying. While none satisfies, more
 /// candidates follow, up to three times as many; if still none does, the candidates
 /// are trained again without the safe margin (`--safe-margin`). λ then restarts at its initial
@@ -215,8 +215,11 @@ fn pretrain_planner(
     Ok(())
 }
 
-/// A candidate satisfies when its mean paths do from this fraction of the validation starts.
-const SATISFYING: f64 = 0.95;
+/// A candidate satisfies when its mean paths do from this fraction of the validation
+/// starts. 0.99, not 0.95: Point Loop seed 4 kept the shortest candidate above 0.95
+/// (0.960), and 10 % of its runs reached a corner outside its disc (0.896); at 0.99,
+/// 1.000. (Every other kept candidate of the 25 README runs was at 1.000.)
+const SATISFYING: f64 = 0.99;
 
 /// The candidates of [`pretrain_planner`] for `task`, and the one kept with its
 /// validation satisfaction and mean path length.
