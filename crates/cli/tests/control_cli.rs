@@ -130,6 +130,8 @@ fn joint_train_resume_and_eval_end_to_end() {
     ];
     let o = schrl(&[&args[..], &["--controller", ctl.to_str().unwrap(), "--out", run_s]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
+    // 5 updates satisfy nothing: pre-training retries without the safe margin.
+    assert!(stderr(&o).contains("planning with the task's own"), "{}", stderr(&o));
     assert!(
         stdout(&o).contains("satisfaction: ") && stdout(&o).contains("steps to reach: "),
         "{}",
@@ -186,5 +188,20 @@ fn joint_train_resume_and_eval_end_to_end() {
         dir.join("x").to_str().unwrap(),
     ]);
     assert!(stderr(&o).contains("a point controller, not car"), "{}", stderr(&o));
+    let o = schrl(&[
+        "train",
+        "--task",
+        "seq",
+        "--safe-margin=-0.5",
+        "--controller",
+        ctl.to_str().unwrap(),
+        "--out",
+        dir.join("y").to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("safe_margin must be a non-negative"),
+        "{}",
+        stderr(&o)
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
