@@ -94,7 +94,7 @@ pub struct TrainArgs {
     /// Metres of clearance the planner keeps from obstacles beyond the task's own
     /// `safe_radius`, room for the controller's curves between waypoints. 0.1 (one
     /// Point radius): with 0, Point Loop seeds 1 and 3 and Cover seed 2 collided in
-    /// 7–10 % of runs passing wall ends; with 0.1 they satisfied 0.994, 1.000, 1.000.
+    /// 7–10 % of runs passing wall ends; with 0.1 they satisfied 0.996, 1.000, 1.000.
     #[arg(long, default_value_t = 0.1)]
     safe_margin: f64,
     #[command(flatten)]
@@ -173,8 +173,8 @@ fn general_controller(robot: Robot, seed: u64, dir: &Path) -> Result<ControlTrai
 /// the best: among those whose mean paths satisfy the spec from ≥ 99 % of validation
 /// starts, the shortest; else the most satisfying. While none satisfies, more
 /// candidates follow, up to three times as many; if still none does, the candidates
-/// are trained again without the safe margin (`--safe-margin`). λ then restarts at its initial
-/// value: the joint phase starts from plans that meet the spec, with the constraint
+/// are trained again without the safe margin (`--safe-margin`). λ then restarts at its
+/// initial value: the joint phase starts from plans that meet the spec, with the constraint
 /// slack, so the controller's return steers the planner instead of a λ inflated by
 /// the first random plans. Each candidate uses its whole budget: once the constraint
 /// is slack the length term keeps shortening the paths (Point Seq seed 0: stopping at
@@ -218,7 +218,7 @@ fn pretrain_planner(
 /// A candidate satisfies when its mean paths do from this fraction of the validation
 /// starts. 0.99, not 0.95: Point Loop seed 4 kept the shortest candidate above 0.95
 /// (0.960), and 10 % of its runs reached a corner outside its disc (0.896); at 0.99,
-/// 1.000. (Every other kept candidate of the 25 README runs was at 1.000.)
+/// 1.000. (22 of the 25 README runs kept a candidate at 1.000 either way.)
 const SATISFYING: f64 = 0.99;
 
 /// The candidates of [`pretrain_planner`] for `task`, and the one kept with its
