@@ -189,18 +189,19 @@ fn pretrain_planner(
     candidates: usize,
     length_weight: f64,
 ) -> Result<()> {
+    let sat_of = |c: &Option<(PlanTrainer, f64, f64)>| c.as_ref().map_or(0.0, |(_, s, _)| *s);
     let widened = t.plan.task().clone();
     let mut best = best_candidate(t.plan.config(), &widened, updates, candidates, length_weight)?;
     // The extra clearance can leave no satisfying plan at all (Point Loop seed 2: none
     // of 9 candidates with 0.1 m more); then plan with the task's own clearance.
-    if best.as_ref().is_none_or(|(_, sat, _)| *sat < SATISFYING) && t.config.safe_margin > 0.0 {
+    if sat_of(&best) < SATISFYING && t.config.safe_margin > 0.0 {
         eprintln!(
             "planner: no candidate met the spec with {} m more clearance; planning with the task's own",
             t.config.safe_margin
         );
         let own = t.task.with_goal_margin(t.config.goal_margin);
         let fallback = best_candidate(t.plan.config(), &own, updates, candidates, length_weight)?;
-        if fallback.as_ref().map_or(0.0, |(_, s, _)| *s) > best.as_ref().map_or(0.0, |(_, s, _)| *s) {
+        if sat_of(&fallback) > sat_of(&best) {
             best = fallback;
             t.config.safe_margin = 0.0;
         }
