@@ -18,9 +18,10 @@
 //! [`Method::Pg`] drops the λ term: plain policy gradient on `r_h` (Table 2's PG).
 
 use candle_core::{DType, Device, Result, Tensor};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW, VarBuilder, VarMap};
+use candle_nn::{VarBuilder, VarMap};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
 use stl::Semantics;
 use stl::tensor::TensorSpec;
 
@@ -48,7 +49,8 @@ impl Lagrangian {
 }
 
 /// Which planning objective.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Method {
     /// Constrained policy gradient (Eq. 4).
     Cpg,
@@ -132,7 +134,8 @@ impl ControlReward for PathLengthReward {
 pub const PROMISING: f64 = 0.5;
 
 /// Hyper-parameters of planner training.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CpgConfig {
     /// Paths per update (the speed target uses 64).
     pub batch: usize,
@@ -152,6 +155,7 @@ pub struct CpgConfig {
     /// (α = 10): segment clearances are tenths of a metre and α = 2 averages them
     /// away (Point Seq, 2000 updates: 8 % of sampled plans satisfied at α = 2, 60 %
     /// at α = 10).
+    #[serde(with = "semantics_text")]
     pub semantics: Semantics,
     /// Objective.
     pub method: Method,
@@ -209,9 +213,10 @@ pub struct UpdateStats {
 pub struct PlanTrainer {
     varmap: VarMap,
     planner: PathPlanner,
-    opt: AdamW,
+    /// Adam over the parameters in name order (both update paths).
+    adam: Adam,
     /// The GRU-ODE's hand-written update (`None` for the ablation planners, which
-    /// train through candle's autodiff with `opt`).
+    /// train through candle's autodiff).
     fast: Option<FastUpdate>,
     spec: TensorSpec,
     hard: stl::Spec,
@@ -227,11 +232,10 @@ pub struct PlanTrainer {
     restarts: usize,
 }
 
-/// The hand-written update's network, activations and Adam state.
+/// The hand-written update's network and activations.
 struct FastUpdate {
     net: GruOdeBackprop,
     tape: Tape,
-    adam: Adam,
     grad: Vec<f32>,
 }
 
@@ -241,15 +245,62 @@ impl FastUpdate {
             return Ok(None);
         }
         let net = GruOdeBackprop::from_varmap(varmap, cfg)?;
-        let adam = candle_adam(net.num_params());
-        Ok(Some(Self { net, tape: Tape::default(), adam, grad: Vec::new() }))
+        Ok(Some(Self { net, tape: Tape::default(), grad: Vec::new() }))
     }
 }
 
-/// Adam as candle's `AdamW` without weight decay (β 0.9/0.999, ε 1e-8), so both
-/// update paths follow the same algorithm.
-fn candle_adam(n: usize) -> Adam {
+/// Adam as PyTorch's and candle's defaults for this planner (β 0.9/0.999, ε 1e-8, no
+/// weight decay) over `n` parameters.
+fn planner_adam(n: usize) -> Adam {
     Adam { eps: 1e-8, ..Adam::new(n) }
+}
+
+/// Number of parameters in `varmap`.
+fn num_params(varmap: &VarMap) -> usize {
+    varmap.all_vars().iter().map(|v| v.elem_count()).sum()
+}
+
+/// The variables of `varmap` in name order: the layout of the flat parameter vector
+/// Adam sees on the autodiff path.
+fn vars_by_name(varmap: &VarMap) -> Vec<candle_core::Var> {
+    let data = varmap.data().lock().expect("varmap lock");
+    let mut named: Vec<(&String, &candle_core::Var)> = data.iter().collect();
+    named.sort_by(|a, b| a.0.cmp(b.0));
+    named.into_iter().map(|(_, v)| v.clone()).collect()
+}
+
+/// Semantics as their command-line text (`soft:10`) in settings files.
+mod semantics_text {
+    use serde::{Deserialize, Deserializer, Serializer};
+    use stl::Semantics;
+
+    pub fn serialize<S: Serializer>(s: &Semantics, out: S) -> Result<S::Ok, S::Error> {
+        out.serialize_str(&s.to_string())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Semantics, D::Error> {
+        let text = String::deserialize(d)?;
+        text.parse().map_err(|e| serde::de::Error::custom(format!("semantics '{text}': {e}")))
+    }
+}
+
+/// What a [`PlanTrainer`] carries between updates besides its weights: enough to
+/// continue training exactly where it stopped.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanTrainerState {
+    /// λ.
+    pub lambda: f64,
+    /// The random stream of starts and noise.
+    pub rng: ChaCha8Rng,
+    /// Adam's moments and step count.
+    pub adam: Adam,
+    /// Updates of the current attempt.
+    pub attempt_updates: usize,
+    /// Whether the current attempt has been promising.
+    pub promising: bool,
+    /// Re-initialisations so far.
+    pub restarts: usize,
 }
 
 /// Draws every parameter from `U(−1/√fan_in, 1/√fan_in)` (PyTorch's default for GRU and
@@ -282,10 +333,9 @@ impl PlanTrainer {
             vb,
         )?;
         seeded_init(&varmap, cfg.seed)?;
-        let params = ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..Default::default() };
-        let opt = AdamW::new(varmap.all_vars(), params)?;
         let fast = FastUpdate::new(&varmap, planner.config())?;
         Ok(Self {
+            adam: planner_adam(num_params(&varmap)),
             fast,
             spec: task.tensor_spec(),
             hard: task.spec(),
@@ -294,7 +344,6 @@ impl PlanTrainer {
             rng: ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x9E37_79B9),
             varmap,
             planner,
-            opt,
             task,
             cfg,
             attempt_updates: 0,
@@ -314,11 +363,9 @@ impl PlanTrainer {
         self.restarts += 1;
         let seed = self.cfg.seed.wrapping_add((self.restarts as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
         seeded_init(&self.varmap, seed)?;
-        let params = ParamsAdamW { lr: self.cfg.lr, weight_decay: 0.0, ..Default::default() };
-        self.opt = AdamW::new(self.varmap.all_vars(), params)?;
+        self.adam = planner_adam(num_params(&self.varmap));
         if let Some(f) = &mut self.fast {
             f.net.load(&self.varmap)?;
-            f.adam = candle_adam(f.net.num_params());
         }
         self.lagrangian.lambda = self.cfg.lambda_init;
         self.attempt_updates = 0;
@@ -432,7 +479,7 @@ impl PlanTrainer {
             objective = (objective + (rho.mean_all()? * self.lagrangian.lambda)?)?;
         }
         let loss = objective.neg()?;
-        self.opt.backward_step(&loss)?;
+        self.autodiff_step(&loss)?;
         let mean_rho = rho_v.iter().sum::<f64>() / b as f64;
         // The constraint is on the true (hard) robustness: smooth robustness can be
         // positive for a path that violates the spec (a softmax-weighted mean lies
@@ -473,9 +520,9 @@ impl PlanTrainer {
         self.control.add_gradient(paths, self.task.steps, self.task.map.dim(), &mut total);
         let drho: Vec<f32> = total.iter().map(|g| (g / b as f64) as f32).collect();
         let f = self.fast.as_mut().expect("fast update");
-        let FastUpdate { net, tape, adam, grad } = f;
+        let FastUpdate { net, tape, grad } = f;
         net.backward(tape, &drho, &score, grad);
-        adam.step(&mut net.params, grad, self.cfg.lr as f32, f32::INFINITY);
+        self.adam.step(&mut net.params, grad, self.cfg.lr as f32, f32::INFINITY);
         net.store(&self.varmap)?;
         let mean_rho = rho.iter().sum::<f64>() / b as f64;
         if self.cfg.method == Method::Cpg {
@@ -489,6 +536,56 @@ impl PlanTrainer {
             lambda: self.lagrangian.lambda,
             loss: -(w * surrogate + lambda * mean_rho),
         })
+    }
+
+    /// One Adam step on `loss` through candle's autodiff (the ablation planners).
+    fn autodiff_step(&mut self, loss: &Tensor) -> Result<()> {
+        let grads = loss.backward()?;
+        let vars = vars_by_name(&self.varmap);
+        let mut params = Vec::with_capacity(self.adam.m.len());
+        let mut grad = Vec::with_capacity(self.adam.m.len());
+        for v in &vars {
+            params.extend(v.as_tensor().flatten_all()?.to_vec1::<f32>()?);
+            match grads.get(v.as_tensor()) {
+                Some(g) => grad.extend(g.flatten_all()?.to_vec1::<f32>()?),
+                None => grad.extend(std::iter::repeat_n(0.0f32, v.elem_count())),
+            }
+        }
+        self.adam.step(&mut params, &mut grad, self.cfg.lr as f32, f32::INFINITY);
+        let mut at = 0;
+        for v in &vars {
+            let n = v.elem_count();
+            v.set(&Tensor::from_slice(&params[at..at + n], v.dims(), v.device())?)?;
+            at += n;
+        }
+        Ok(())
+    }
+
+    /// Everything but the weights that training carries between updates.
+    pub fn state(&self) -> PlanTrainerState {
+        PlanTrainerState {
+            lambda: self.lagrangian.lambda,
+            rng: self.rng.clone(),
+            adam: self.adam.clone(),
+            attempt_updates: self.attempt_updates,
+            promising: self.promising,
+            restarts: self.restarts,
+        }
+    }
+
+    /// Restores what [`PlanTrainer::state`] returned (after [`PlanTrainer::load_weights`]).
+    pub fn restore_state(&mut self, state: PlanTrainerState) -> Result<()> {
+        let n = num_params(&self.varmap);
+        if state.adam.m.len() != n || state.adam.v.len() != n {
+            candle_core::bail!("optimizer moments for {} parameters, the planner has {n}", state.adam.m.len());
+        }
+        self.lagrangian.lambda = state.lambda;
+        self.rng = state.rng;
+        self.adam = state.adam;
+        self.attempt_updates = state.attempt_updates;
+        self.promising = state.promising;
+        self.restarts = state.restarts;
+        Ok(())
     }
 
     /// Loads planner weights saved from a trainer of the same shape.

@@ -66,6 +66,54 @@ impl Default for JointConfig {
     }
 }
 
+/// The evaluation protocol's defaults (paper §4.4: 5 groups of 100 runs); the seed of
+/// starts and plans is this project's fixed choice, so evaluations compare.
+pub const EVAL_GROUPS: usize = 5;
+/// Runs per evaluation group.
+pub const EVAL_PER_GROUP: usize = 100;
+/// Seed of evaluation starts and plans.
+pub const EVAL_SEED: u64 = 2024;
+
+/// Every setting of a `schrl train` run: what its run directory's manifest holds,
+/// and what `--resume` and `schrl eval` read back whole.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointRunSettings {
+    /// The robot.
+    pub robot: Robot,
+    /// The task's TOML text.
+    pub task_toml: String,
+    /// The task's spec text.
+    pub task_spec: String,
+    /// Seed of everything.
+    pub seed: u64,
+    /// Environment steps of joint training (3 M).
+    pub steps: usize,
+    /// Stop early once this fraction of the last 20 iterations' runs satisfy the task (0.97).
+    pub target: f64,
+    /// The controller run warm-starting the controller; `None`: a general controller
+    /// trained into the run's `general/`.
+    pub controller: Option<std::path::PathBuf>,
+    /// Joint-training settings.
+    pub joint: JointConfig,
+    /// The planner's training hyper-parameters.
+    pub cpg: CpgConfig,
+    /// Planner pre-training.
+    pub pretrain: crate::pretrain::PretrainConfig,
+    /// Evaluation groups of [`EVAL_PER_GROUP`] runs after training (0: none).
+    pub eval_groups: usize,
+    /// Iterations between checkpoints (50).
+    pub save_every: usize,
+}
+
+impl JointRunSettings {
+    /// The task these settings train on.
+    pub fn task(&self) -> Result<Task, crate::tasks::TaskError> {
+        let here = std::path::Path::new("settings");
+        Task::from_texts(here, &self.task_toml, here, &self.task_spec)
+    }
+}
+
 /// What one iteration measured.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct JointMetrics {
@@ -102,9 +150,9 @@ pub struct JointTrainer {
     /// The controller's training state (policy, PPO, normaliser, random stream).
     pub control: ControlTrainer,
     envs: Vec<Box<dyn Env>>,
-    scaler: RewardScaler,
-    buffer: RolloutBuffer,
-    rng: ChaCha8Rng,
+    pub(crate) scaler: RewardScaler,
+    pub(crate) buffer: RolloutBuffer,
+    pub(crate) rng: ChaCha8Rng,
     /// Iterations done.
     pub iterations: usize,
     /// Environment steps done.
@@ -481,110 +529,4 @@ pub fn evaluate_task(
         }
     }
     Ok(eval)
-}
-
-/// Saving and restoring joint runs: `planner.safetensors` (planner weights),
-/// `joint.json` (the task's two files, settings, λ, counters) and `controller/` (a
-/// controller checkpoint, restored exactly). The planner's Adam moments are not
-/// saved: a resumed run restarts them.
-pub mod run_dir {
-    use std::path::Path;
-
-    use serde::{Deserialize, Serialize};
-
-    use super::{JointConfig, JointTrainer};
-    use crate::checkpoint::{CheckpointError, io, write_atomic};
-    use crate::cpg::{CpgConfig, Method};
-    use crate::planner::PlannerKind;
-    use crate::tasks::Task;
-
-    const META: &str = "joint.json";
-    const PLANNER: &str = "planner.safetensors";
-    const CONTROLLER: &str = "controller";
-
-    #[derive(Serialize, Deserialize)]
-    #[serde(deny_unknown_fields)]
-    struct Meta {
-        format: u32,
-        task_toml: String,
-        task_spec: String,
-        joint: JointConfig,
-        seed: u64,
-        semantics: String,
-        method: String,
-        iterations: usize,
-        env_steps: usize,
-        lambda: f64,
-        /// The planner network (runs saved before it was recorded used the GRU-ODE).
-        #[serde(default = "gru_ode")]
-        planner: String,
-    }
-
-    fn gru_ode() -> String {
-        PlannerKind::GruOde.name().into()
-    }
-
-    /// `true` if `dir` holds a joint run.
-    pub fn exists(dir: &Path) -> bool {
-        dir.join(META).exists()
-    }
-
-    /// Saves the run into `dir`; refuses to replace one unless `overwrite`.
-    pub fn save(dir: &Path, t: &JointTrainer, overwrite: bool) -> Result<(), CheckpointError> {
-        if !overwrite && exists(dir) {
-            return Err(CheckpointError::Exists(dir.to_path_buf()));
-        }
-        std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
-        let cfg = t.plan.config();
-        let meta = Meta {
-            format: 1,
-            task_toml: t.task.toml.clone(),
-            task_spec: t.task.spec.clone(),
-            joint: t.config.clone(),
-            seed: cfg.seed,
-            semantics: cfg.semantics.to_string(),
-            method: if cfg.method == Method::Cpg { "cpg" } else { "pg" }.into(),
-            iterations: t.iterations,
-            env_steps: t.env_steps,
-            lambda: t.plan.lagrangian().lambda,
-            planner: cfg.planner.name().into(),
-        };
-        let planner = dir.join(PLANNER);
-        write_atomic(&planner, |p| t.plan.varmap().save(p).map_err(|e| e.to_string()))?;
-        crate::control::checkpoint::save(&dir.join(CONTROLLER), &t.control, true)?;
-        let path = dir.join(META);
-        let json = serde_json::to_string_pretty(&meta).map_err(|e| io(&path, e))?;
-        write_atomic(&path, |p| std::fs::write(p, json).map_err(|e| e.to_string()))
-    }
-
-    /// Loads the run in `dir`.
-    pub fn load(dir: &Path) -> Result<JointTrainer, CheckpointError> {
-        let path = dir.join(META);
-        let invalid = |message: String| CheckpointError::Invalid { path: path.clone(), message };
-        let text = std::fs::read_to_string(&path).map_err(|e| io(&path, e))?;
-        let meta: Meta = serde_json::from_str(&text).map_err(|e| invalid(e.to_string()))?;
-        let task = Task::from_texts(&path, &meta.task_toml, &path, &meta.task_spec)
-            .map_err(|e| invalid(e.message))?;
-        let cpg = CpgConfig {
-            seed: meta.seed,
-            semantics: meta.semantics.parse().map_err(|e| invalid(format!("semantics: {e}")))?,
-            method: match meta.method.as_str() {
-                "cpg" => Method::Cpg,
-                "pg" => Method::Pg,
-                other => return Err(invalid(format!("method '{other}' is not cpg or pg"))),
-            },
-            planner: meta.planner.parse().map_err(|e: String| invalid(format!("planner: {e}")))?,
-            ..CpgConfig::default()
-        };
-        let control = crate::control::checkpoint::load(&dir.join(CONTROLLER))?;
-        let mut t = JointTrainer::new(task, meta.joint, cpg, control).map_err(|e| invalid(e.to_string()))?;
-        let planner = dir.join(PLANNER);
-        t.plan
-            .load_weights(&planner)
-            .map_err(|e| CheckpointError::Invalid { path: planner.clone(), message: e.to_string() })?;
-        t.plan.set_lambda(meta.lambda);
-        t.iterations = meta.iterations;
-        t.env_steps = meta.env_steps;
-        Ok(t)
-    }
 }

@@ -7,14 +7,13 @@
 //! * [`deployed`] — a trained planner's mean path in plain Rust, no autodiff (deployment).
 //! * [`gradient_planner`] — the gradient planner baseline (waypoints optimised directly).
 //! * [`neural_sdf`] — MLP signed distances fitted to a map, as STL predicates.
-//! * [`checkpoint`] — saving and loading trained planners.
 //! * [`control`] — the goal-conditioned PPO controller.
 //! * [`execute`] — driving the robot through a plan's waypoints; satisfaction of what it did.
-//! * [`joint`] — joint training of planner and controller (Algorithm 1), task evaluation.
+//! * [`joint`] — joint training of planner and controller, task evaluation.
+//! * [`store`] — run directories: manifest, atomic checkpoints, lock, metrics log.
 
 #![warn(missing_docs)]
 
-pub mod checkpoint;
 pub mod control;
 pub mod cpg;
 pub mod deployed;
@@ -24,4 +23,6 @@ pub mod gru_ode_backprop;
 pub mod joint;
 pub mod neural_sdf;
 pub mod planner;
+pub mod pretrain;
+pub mod store;
 pub mod tasks;

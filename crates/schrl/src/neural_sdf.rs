@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 use sim::Map;
 use stl::Predicate;
 
-use crate::checkpoint::{CheckpointError, write_atomic};
+use crate::store::{StoreError, write_atomic};
 use crate::control::adam::Adam;
 use crate::control::mlp::{MlpCache, TanhMlp};
 
@@ -227,17 +227,17 @@ impl NeuralSdf {
     }
 
     /// Saves the network as JSON, atomically; refuses to replace a file unless `force`.
-    pub fn save(&self, path: &Path, force: bool) -> Result<(), CheckpointError> {
+    pub fn save(&self, path: &Path, force: bool) -> Result<(), StoreError> {
         if path.exists() && !force {
-            return Err(CheckpointError::Exists(path.to_path_buf()));
+            return Err(StoreError::FileExists(path.to_path_buf()));
         }
         let json = serde_json::to_string(self).expect("weights are plain numbers");
-        write_atomic(path, |p| std::fs::write(p, json).map_err(|e| e.to_string()))
+        write_atomic(path, json.as_bytes())
     }
 
     /// Loads a network saved by [`NeuralSdf::save`], checking its shape.
-    pub fn load(path: &Path) -> Result<Self, CheckpointError> {
-        let invalid = |message: String| CheckpointError::Invalid { path: path.to_path_buf(), message };
+    pub fn load(path: &Path) -> Result<Self, StoreError> {
+        let invalid = |message: String| StoreError::Invalid { path: path.to_path_buf(), message };
         let text =
             std::fs::read_to_string(path).map_err(|e| invalid(format!("cannot read the neural SDF: {e}")))?;
         let net: Self = serde_json::from_str(&text).map_err(|e| invalid(e.to_string()))?;

@@ -22,7 +22,8 @@ use candle_nn::rnn::{GRU, GRUConfig, GRUState, RNN, gru};
 use candle_nn::{Linear, Module, VarBuilder, linear};
 
 /// Which network maps the current waypoint to the next one's Gaussian.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum PlannerKind {
     /// The paper's GRU-ODE: memory and a bounded residual step (Eq. 3).
     #[default]
@@ -58,7 +59,8 @@ impl std::str::FromStr for PlannerKind {
 }
 
 /// Shape and constants of a planner.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PlannerConfig {
     /// Plan-space dimension (2 or 3).
     pub dim: usize,

@@ -28,7 +28,8 @@ use stl::tensor::TensorSpec;
 use stl::{AfterStep, Ball, Formula, Predicate, Spec};
 
 /// One of the five task types.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum TaskKind {
     /// Visit goals in order.
     Seq,
@@ -83,7 +84,7 @@ pub struct GoalRegion {
 }
 
 /// Where a task's `safe` predicate checks the clearance from obstacles.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum SafeAlong {
     /// Along the straight segment that arrives at each waypoint (from the one

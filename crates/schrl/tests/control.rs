@@ -4,11 +4,11 @@
 use candle_core::{Device, Tensor, Var};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use schrl::control::checkpoint;
 use schrl::control::policy::{ActorCritic, PolicyCache};
 use schrl::control::ppo::{Minibatch, loss_and_grad};
 use schrl::control::trainer::open_map;
 use schrl::control::{ControlConfig, ControlTrainer, PpoConfig, evaluate};
+use schrl::store::{self, Existing, RunKind, RunWriter};
 use sim::Robot;
 
 /// The same MLP in candle: weights as variables, `tanh` on hidden layers.
@@ -168,6 +168,12 @@ fn identical_seeds_give_identical_runs_for_every_robot() {
     }
 }
 
+/// A controller run directory holding `t`'s checkpoint.
+fn save_run(dir: &std::path::Path, t: &ControlTrainer) {
+    let mut run = RunWriter::create(dir, RunKind::Controller, &t.config, Existing::Replace).unwrap();
+    run.save(|f| store::controller::save_into(f, t)).unwrap();
+}
+
 #[test]
 fn resuming_from_a_checkpoint_continues_exactly() {
     let dir = std::env::temp_dir().join(format!("schrl-control-resume-{}", std::process::id()));
@@ -175,18 +181,18 @@ fn resuming_from_a_checkpoint_continues_exactly() {
     let cfg = tiny_config(Robot::Car, 8, 8000);
     let mut straight = ControlTrainer::new(cfg.clone()).unwrap();
     let first = numbers(&straight.train_update().unwrap());
-    checkpoint::save(&dir, &straight, false).unwrap();
+    save_run(&dir, &straight);
     let second = numbers(&straight.train_update().unwrap());
 
-    let mut resumed = checkpoint::load(&dir).unwrap();
+    let mut resumed = store::controller::load(&dir).unwrap();
     assert_eq!(resumed.updates, 1);
     assert_eq!(numbers(&resumed.train_update().unwrap()), second);
     assert_eq!(resumed.policy.params, straight.policy.params);
     assert_ne!(first, second);
 
-    // Saving again without permission to overwrite is refused.
-    let err = checkpoint::save(&dir, &resumed, false).unwrap_err();
-    assert!(err.to_string().contains("already holds a checkpoint"), "{err}");
+    // Starting another run there without permission to replace it is refused.
+    let err = RunWriter::create(&dir, RunKind::Controller, &cfg, Existing::Refuse).err().unwrap();
+    assert!(err.to_string().contains("already holds a controller run"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -197,22 +203,22 @@ fn corrupt_or_mismatched_checkpoints_are_clear_errors() {
     let (a, b) = (base.join("a"), base.join("b"));
     let point = ControlTrainer::new(tiny_config(Robot::Point, 1, 4000)).unwrap();
     let car = ControlTrainer::new(tiny_config(Robot::Car, 1, 4000)).unwrap();
-    checkpoint::save(&a, &point, false).unwrap();
-    checkpoint::save(&b, &car, false).unwrap();
+    save_run(&a, &point);
+    save_run(&b, &car);
 
-    // Weights of another run next to this run's metadata.
-    std::fs::copy(b.join("controller.safetensors"), a.join("controller.safetensors")).unwrap();
-    let err = checkpoint::load(&a).err().expect("mixed files must not load").to_string();
-    assert!(err.contains("controller.safetensors"), "{err}");
+    // Weights of another run in place of this run's.
+    std::fs::copy(b.join("gen-0/controller.safetensors"), a.join("gen-0/controller.safetensors")).unwrap();
+    let err = store::controller::load(&a).err().expect("mixed files must not load").to_string();
+    assert!(err.contains("controller.safetensors") && err.contains("checksum"), "{err}");
 
-    // Truncated metadata.
-    let meta = b.join("controller.json");
-    let text = std::fs::read_to_string(&meta).unwrap();
-    std::fs::write(&meta, &text[..text.len() / 2]).unwrap();
-    let err = checkpoint::load(&b).err().expect("truncated metadata must not load").to_string();
+    // Truncated state.
+    let state = b.join("gen-0/controller.json");
+    let text = std::fs::read_to_string(&state).unwrap();
+    std::fs::write(&state, &text[..text.len() / 2]).unwrap();
+    let err = store::controller::load(&b).err().expect("truncated state must not load").to_string();
     assert!(err.contains("controller.json"), "{err}");
 
-    let err = checkpoint::load(&base.join("missing")).err().expect("no checkpoint").to_string();
+    let err = store::controller::load(&base.join("missing")).err().expect("no checkpoint").to_string();
     assert!(err.contains("missing"), "{err}");
     std::fs::remove_dir_all(&base).unwrap();
 }

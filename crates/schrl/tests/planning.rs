@@ -2,6 +2,9 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
+use schrl::store::planner::PlanRunSettings;
+use schrl::store::{self, Checkpoint, Existing, RunKind, RunWriter};
+use schrl::tasks::SafeAlong;
 use schrl::cpg::{CpgConfig, Lagrangian, Method, PlanTrainer, seeded_init};
 use schrl::planner::{PathPlanner, PlannerConfig};
 use schrl::tasks::{Task, TaskKind};
@@ -135,36 +138,33 @@ fn checkpoint_round_trip_gives_the_same_paths() {
     }
     let dir = std::env::temp_dir().join(format!("schrl-ckpt-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let meta = schrl::checkpoint::PlannerMeta {
-        robot: "point".into(),
-        task: "seq".into(),
-        method: "cpg".into(),
-        semantics: "soft:2".into(),
-        seed: 2,
+    let settings = PlanRunSettings {
+        task: TaskKind::Seq,
+        safe_along: SafeAlong::Segments,
+        cpg: *t.config(),
         updates: 3,
-        lambda: t.lagrangian().lambda,
-        dim: 2,
-        hidden: 64,
-        bound: 10.0,
-        min_std: 0.1,
-        planner: "gru-ode".into(),
-        safe_along: "segments".into(),
+        target: 0.95,
     };
-    schrl::checkpoint::save(&dir, &t, &meta, false).unwrap();
-    assert!(matches!(
-        schrl::checkpoint::save(&dir, &t, &meta, false),
-        Err(schrl::checkpoint::CheckpointError::Exists(_))
-    ));
-    let loaded = schrl::checkpoint::load(&dir).unwrap();
-    assert_eq!(loaded.meta, meta);
+    let mut run = RunWriter::create(&dir, RunKind::Planner, &settings, Existing::Refuse).unwrap();
+    run.save(|f| store::planner::save_into(f, &t, 3, false)).unwrap();
+    drop(run);
+    let loaded = store::planner::load(&dir).unwrap();
+    assert_eq!(loaded.meta.updates, 3);
+    assert_eq!(loaded.meta.cpg, *t.config());
     let g0 = Tensor::new(&[[1.5f32, -1.5]], &Device::Cpu).unwrap();
     let a = t.planner().mean_path(&g0, 8).unwrap().to_vec3::<f32>().unwrap();
     let b = loaded.planner.mean_path(&g0, 8).unwrap().to_vec3::<f32>().unwrap();
     assert_eq!(a, b);
-    // A corrupt metadata file is a clear error naming the file.
-    std::fs::write(dir.join("planner.json"), "{ not json").unwrap();
-    let err = schrl::checkpoint::load(&dir).err().unwrap().to_string();
+    // The restored trainer continues exactly as the original does.
+    let ckpt = Checkpoint::open(&dir, RunKind::Planner).unwrap();
+    let (mut resumed, updates, _) = store::planner::load_trainer(&ckpt, &settings).unwrap();
+    assert_eq!(updates, 3);
+    assert_eq!(resumed.update().unwrap(), t.update().unwrap());
+    // A corrupt state file is a clear error naming the file.
+    std::fs::write(dir.join("gen-0/planner.json"), "{ not json").unwrap();
+    let err = store::planner::load(&dir).err().unwrap().to_string();
     assert!(err.contains("planner.json"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Checking the deployed (mean) paths must not change training: an early version

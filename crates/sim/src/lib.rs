@@ -48,7 +48,8 @@ pub use robots::point::Point;
 pub use vec_env::VecEnv;
 
 /// The robots of the paper.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Robot {
     /// Safety Gym's Point.
     Point,

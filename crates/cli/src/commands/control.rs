@@ -1,13 +1,12 @@
 //! `schrl control`: train and evaluate goal-conditioned PPO controllers.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use schrl::control::checkpoint;
-use schrl::control::trainer::open_map;
+use schrl::control::trainer::EVAL_SEED;
 use schrl::control::{ControlConfig, ControlMetrics, ControlTrainer, PpoConfig, evaluate};
+use schrl::store::{self, MetricsLog, RunKind, RunWriter};
 use sim::render::{ChartPanel, Goal, PathKind, Polyline, RobotMarker, Scene};
 use sim::{Map, Robot};
 
@@ -33,12 +32,12 @@ pub struct TrainArgs {
     /// Environment steps (default: the robot's budget for ≥ 95 % success).
     #[arg(long)]
     steps: Option<usize>,
-    /// Seed of weights, environments and noise.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// PPO hyper-parameters: reference (the authors') or cleanrl.
-    #[arg(long, default_value = "reference")]
-    preset: String,
+    /// Seed of weights, environments and noise [default: 0].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// PPO hyper-parameters: reference (the authors') or cleanrl [default: reference].
+    #[arg(long)]
+    preset: Option<String>,
     /// Environments stepped together.
     #[arg(long)]
     num_envs: Option<usize>,
@@ -62,7 +61,7 @@ pub struct EvalArgs {
     #[arg(long, default_value_t = 500)]
     episodes: usize,
     /// Seed of starts and goals.
-    #[arg(long, default_value_t = 12345)]
+    #[arg(long, default_value_t = EVAL_SEED)]
     seed: u64,
     /// Map (default: the one the controller trained on).
     #[arg(long)]
@@ -91,60 +90,89 @@ fn parse_map(name: &str) -> Result<Map> {
         .with_context(|| format!("unknown map '{name}': expected one of {}", sim::map::MAP_NAMES.join(", ")))
 }
 
-fn train(args: TrainArgs) -> Result<()> {
-    let mut trainer = if args.run.resume {
-        if !checkpoint::exists(&args.run.out) {
-            bail!("--resume: {} holds no controller checkpoint", args.run.out.display());
+impl TrainArgs {
+    /// The PPO settings the flags ask for.
+    fn ppo(&self) -> Result<PpoConfig> {
+        let name = self.preset.as_deref().unwrap_or("reference");
+        let mut ppo = PpoConfig::preset(name)
+            .with_context(|| format!("unknown --preset '{name}': expected reference or cleanrl"))?;
+        if let Some(n) = self.num_envs {
+            ppo.num_envs = n;
+            ppo.rollout = ppo.rollout.div_ceil(n) * n;
         }
-        let mut t = checkpoint::load(&args.run.out)?;
-        if let Some(robot) = args.robot
-            && robot != t.robot
-        {
-            bail!("--resume: {} is a {} run, not {robot}", args.run.out.display(), t.robot);
-        }
-        if let Some(steps) = args.steps {
-            t.config.total_steps = steps;
-        }
-        t
-    } else {
-        let Some(robot) = args.robot else { bail!("--robot is required (point, car or drone)") };
-        if checkpoint::exists(&args.run.out) && !args.run.force {
-            bail!(
-                "{} already holds a controller run; pass --force to replace it or --resume",
-                args.run.out.display()
-            );
-        }
+        Ok(ppo)
+    }
+
+    /// The settings of a new run.
+    fn settings(&self) -> Result<ControlConfig> {
+        let Some(robot) = self.robot else { bail!("--robot is required (point, car, drone or doggo)") };
         let mut config = ControlConfig::for_robot(robot);
-        config.ppo = PpoConfig::preset(&args.preset)
-            .with_context(|| format!("unknown --preset '{}': expected reference or cleanrl", args.preset))?;
-        if let Some(n) = args.num_envs {
-            config.ppo.num_envs = n;
-            config.ppo.rollout = config.ppo.rollout.div_ceil(n) * n;
+        config.ppo = self.ppo()?;
+        if let Some(m) = &self.map {
+            config.map = parse_map(m)?.name().to_string();
         }
-        config.map = match &args.map {
-            Some(m) => parse_map(m)?.name().to_string(),
-            None => open_map(robot).name().to_string(),
-        };
-        config.seed = args.seed;
-        if let Some(steps) = args.steps {
+        config.seed = self.seed.unwrap_or(0);
+        if let Some(steps) = self.steps {
             config.total_steps = steps;
         }
-        ControlTrainer::new(config)?
+        Ok(config)
+    }
+
+    /// The saved settings, with a new step budget if given; other flags that differ
+    /// from the saved run are refused by name.
+    fn resumed(&self, saved: &ControlConfig) -> Result<ControlConfig> {
+        use super::differs;
+        let preset_differs = self.preset.is_some() && self.ppo()? != saved.ppo;
+        let map = self.map.as_deref().map(|m| parse_map(m).map(|m| m.name().to_string())).transpose()?;
+        super::refuse_conflicts(
+            RunKind::Controller,
+            &[
+                ("--robot", self.robot.is_some_and(|r| r.name() != saved.robot)),
+                ("--map", differs(&map, &saved.map)),
+                ("--seed", differs(&self.seed, &saved.seed)),
+                ("--preset", preset_differs),
+                ("--num-envs", differs(&self.num_envs, &saved.ppo.num_envs)),
+            ],
+        )?;
+        Ok(ControlConfig { total_steps: self.steps.unwrap_or(saved.total_steps), ..saved.clone() })
+    }
+}
+
+fn train(args: TrainArgs) -> Result<()> {
+    let out = args.run.out.clone();
+    let (mut run, mut trainer, resumed) = if args.run.resume {
+        let (mut run, ckpt) = RunWriter::resume(&out, RunKind::Controller).map_err(super::store_error)?;
+        let config = args.resumed(&run.settings().map_err(super::store_error)?)?;
+        run.set_settings(&config).map_err(super::store_error)?;
+        let trainer = if ckpt.has_files() {
+            let mut t = store::controller::load_from(&ckpt)?;
+            t.config.total_steps = config.total_steps;
+            t
+        } else {
+            ControlTrainer::new(config)?
+        };
+        (run, trainer, true)
+    } else {
+        let config = args.settings()?;
+        let trainer = ControlTrainer::new(config.clone())?;
+        let run = RunWriter::create(&out, RunKind::Controller, &config, args.run.existing())
+            .map_err(super::store_error)?;
+        (run, trainer, false)
     };
-    std::fs::create_dir_all(&args.run.out)
-        .with_context(|| format!("cannot create {}", args.run.out.display()))?;
+    crate::interrupt::install();
     let updates = trainer.updates;
-    let (mut history, mut log) =
-        super::open_metrics_log(&args.run.out, args.run.resume, |m: &ControlMetrics| m.update <= updates)?;
+    let (mut log, mut history) =
+        MetricsLog::open(&run, resumed, |m: &ControlMetrics| m.update <= updates).map_err(super::store_error)?;
     let total = trainer.total_updates();
     let bar = ProgressBar::new(total as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} updates {elapsed_precise} {msg}")?);
     bar.set_position(trainer.updates as u64);
     let start = std::time::Instant::now();
     let first_step = trainer.steps;
+    let mut interrupted = false;
     while !trainer.finished() {
         let m = trainer.train_update()?;
-        writeln!(log, "{}", serde_json::to_string(&m)?)?;
+        log.append(&m)?;
         bar.set_position(m.update as u64);
         bar.set_message(format!(
             "success {} return {} {:.0} steps/s",
@@ -154,25 +182,32 @@ fn train(args: TrainArgs) -> Result<()> {
         ));
         history.push(m);
         if trainer.updates % args.save_every.max(1) == 0 {
-            checkpoint::save(&args.run.out, &trainer, true)?;
+            run.save(|f| store::controller::save_into(f, &trainer))?;
+        }
+        if crate::interrupt::requested() {
+            interrupted = true;
+            break;
         }
     }
     bar.finish_and_clear();
-    checkpoint::save(&args.run.out, &trainer, true)?;
+    run.save(|f| store::controller::save_into(f, &trainer))?;
+    if interrupted {
+        return Err(crate::interrupt::stopped(&out, format!("update {}", trainer.updates)));
+    }
     let wall = start.elapsed().as_secs_f64();
-    let curve = args.run.out.join("training_curve.png");
+    let curve = out.join("training_curve.png");
     save_curve(&history, &curve)?;
     println!(
         "trained the {} for {} environment steps in {wall:.1} s ({:.0} steps/s); run in {}",
         trainer.robot,
         trainer.steps,
         (trainer.steps - first_step) as f64 / wall.max(1e-9),
-        args.run.out.display()
+        out.display()
     );
     if args.eval_episodes > 0 {
         let map = parse_map(&trainer.config.map)?;
         let r =
-            evaluate(&trainer.controller(), &map, args.eval_episodes, 12345, trainer.config.episode_steps)?;
+            evaluate(&trainer.controller(), &map, args.eval_episodes, EVAL_SEED, trainer.config.episode_steps)?;
         print_eval(&r);
     }
     Ok(())
@@ -204,8 +239,9 @@ fn eval(args: EvalArgs) -> Result<()> {
     if args.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
-    let controller = checkpoint::load_controller(&args.ckpt)?;
-    let trained_map = checkpoint::load(&args.ckpt)?.config.map;
+    let trainer = store::controller::load(&args.ckpt).map_err(super::store_error)?;
+    let controller = trainer.controller();
+    let trained_map = trainer.config.map;
     let map = parse_map(args.map.as_deref().unwrap_or(&trained_map))?;
     let r = evaluate(&controller, &map, args.episodes, args.seed, args.max_steps)?;
     if let Some(out) = &args.out {

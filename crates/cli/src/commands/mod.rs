@@ -9,48 +9,57 @@ pub mod spec_text;
 pub mod task;
 pub mod train;
 
-/// Opens `dir/metrics.jsonl` for a run. A fresh run starts an empty log; a resumed
-/// run keeps the earlier lines its checkpoint covers (`covered`), so the log has no
-/// duplicates, and gets them back as its history. A malformed line is an error
-/// naming the file and line.
-pub fn open_metrics_log<T: serde::Serialize + serde::de::DeserializeOwned>(
-    dir: &std::path::Path,
-    resume: bool,
-    covered: impl Fn(&T) -> bool,
-) -> anyhow::Result<(Vec<T>, std::fs::File)> {
-    use anyhow::Context;
-    use std::io::Write;
-    let path = dir.join("metrics.jsonl");
-    let mut history: Vec<T> = match (resume, std::fs::read_to_string(&path)) {
-        (true, Ok(text)) => text
-            .lines()
-            .enumerate()
-            .filter(|(_, l)| !l.trim().is_empty())
-            .map(|(i, l)| {
-                serde_json::from_str(l)
-                    .with_context(|| format!("{}:{}: not a metrics line", path.display(), i + 1))
-            })
-            .collect::<anyhow::Result<_>>()?,
-        _ => Vec::new(),
-    };
-    history.retain(|m| covered(m));
-    let mut log = std::fs::File::create(&path).with_context(|| format!("cannot write {}", path.display()))?;
-    for m in &history {
-        writeln!(log, "{}", serde_json::to_string(m)?)?;
-    }
-    Ok((history, log))
-}
+use schrl::store::{Existing, RunKind, StoreError};
 
 /// Where a training run lives, and what to do when it already exists.
 #[derive(clap::Args, Debug)]
 pub struct RunDirArgs {
-    /// Run directory: checkpoint, metrics.jsonl, training_curve.png.
+    /// Run directory: manifest, checkpoints, metrics.jsonl, pictures.
     #[arg(long)]
     pub out: std::path::PathBuf,
-    /// Replace an existing run in --out.
+    /// Replace an existing run of the same kind in --out.
     #[arg(long)]
     pub force: bool,
-    /// Continue the run saved in --out (up to --steps).
+    /// Continue the run saved in --out exactly where its last checkpoint left it.
     #[arg(long, conflicts_with = "force")]
     pub resume: bool,
+}
+
+impl RunDirArgs {
+    /// What to do with an existing run when starting a new one.
+    pub fn existing(&self) -> Existing {
+        if self.force { Existing::Replace } else { Existing::Refuse }
+    }
+}
+
+/// A store error as the command line says it: with the flag that would help.
+pub fn store_error(e: StoreError) -> anyhow::Error {
+    let hint = match &e {
+        StoreError::Exists { .. } => "; pass --force to replace it, or --resume to continue it",
+        StoreError::FileExists(_) => "; pass --force to replace it",
+        StoreError::Busy(_) => "; wait for it to finish, or choose another --out",
+        StoreError::OtherKind { .. } => "; choose another directory",
+        _ => "",
+    };
+    anyhow::anyhow!("{e}{hint}")
+}
+
+/// Refuses `--resume` flags that differ from the saved run's settings, naming them.
+/// Each entry: the flag, and whether it was given with a value other than the saved one.
+pub fn refuse_conflicts(kind: RunKind, conflicts: &[(&str, bool)]) -> anyhow::Result<()> {
+    let named: Vec<&str> = conflicts.iter().filter(|(_, c)| *c).map(|(f, _)| *f).collect();
+    if named.is_empty() {
+        return Ok(());
+    }
+    anyhow::bail!(
+        "--resume: {} differ{} from the saved {kind} run's settings; a resumed run keeps its settings \
+         (drop the flag, or start a new run)",
+        named.join(", "),
+        if named.len() == 1 { "s" } else { "" }
+    )
+}
+
+/// `true` when `given` is set and differs from `saved`.
+pub fn differs<T: PartialEq>(given: &Option<T>, saved: &T) -> bool {
+    given.as_ref().is_some_and(|g| g != saved)
 }

@@ -1,14 +1,14 @@
 //! `schrl plan`: train the GRU-ODE planner on a task, sample from it, and time
 //! its plans against the gradient planner.
 
-use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use schrl::checkpoint::{self, PlannerMeta};
+use schrl::store::planner::PlanRunSettings;
+use schrl::store::{self, MetricsLog, RunKind, RunWriter};
 use schrl::cpg::{CpgConfig, Method, PlanTrainer};
 use schrl::deployed::{DeployedPlanner, PlanScratch};
 use schrl::gradient_planner::{self, GradientPlannerConfig};
@@ -51,48 +51,125 @@ pub struct TimeArgs {
     from: CheckpointStarts,
 }
 
-/// Arguments of `schrl plan train`.
+/// Arguments of `schrl plan train`. With `--resume`, flags left out take the saved
+/// run's values; a flag given with another value is refused (`--updates`, `--target`
+/// and `--save-every` may change).
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
     /// Robot (planner tasks exist for point).
     #[arg(long, default_value = "point")]
     robot: String,
-    /// Task: seq, cover, branch, loop or signal.
+    /// Task: seq, cover, branch, loop or signal. Required for a new run.
     #[arg(long)]
-    task: TaskKind,
-    /// Planner network: gru-ode (the paper's), or the ablations gru and mlp (Fig. 6).
-    #[arg(long, default_value = "gru-ode")]
-    planner: PlannerKind,
-    /// Where the task's `safe` is checked: segments (the task's default: the straight
-    /// segment into each waypoint, what a controller drives) or waypoints (the
-    /// paper's literal `□ safe` on the plan's states).
+    task: Option<TaskKind>,
+    /// Planner network: gru-ode (the paper's), or the ablations gru and mlp (Fig. 6)
+    /// [default: gru-ode].
+    #[arg(long)]
+    planner: Option<PlannerKind>,
+    /// Where the task's `safe` is checked: segments (the straight segment into each
+    /// waypoint, what a controller drives) or waypoints (the paper's literal `□ safe` on
+    /// the plan's states) [default: the task's, segments].
     #[arg(long)]
     safe_along: Option<SafeAlong>,
     /// Restart from a fresh initialisation when an attempt has not had half its
-    /// sampled paths satisfy the spec within this many updates (0: never).
-    #[arg(long, default_value_t = CpgConfig::default().restart_after.unwrap_or(0))]
-    restart_after: usize,
-    /// cpg (constrained policy gradient) or pg (policy gradient only).
-    #[arg(long, default_value = "cpg", value_parser = parse_method)]
-    method: Method,
-    /// Semantics of the spec in the loss: hard, soft:<alpha> or lse:<temperature>.
-    #[arg(long, default_value = "soft:10")]
-    semantics: Semantics,
-    /// Seed of parameters, starts and noise.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Most gradient updates.
-    #[arg(long, default_value_t = 3000)]
-    updates: usize,
-    /// Stop once this fraction of sampled paths satisfies the spec.
-    #[arg(long, default_value_t = 0.95)]
-    target: f64,
-    /// Checkpoint directory (metrics.jsonl is written there too).
+    /// sampled paths satisfy the spec within this many updates; 0: never [default: 150].
     #[arg(long)]
-    out: PathBuf,
-    /// Replace an existing checkpoint.
+    restart_after: Option<usize>,
+    /// cpg (constrained policy gradient) or pg (policy gradient only) [default: cpg].
+    #[arg(long, value_parser = parse_method)]
+    method: Option<Method>,
+    /// Semantics of the spec in the loss: hard, soft:<alpha> or lse:<temperature>
+    /// [default: soft:10].
     #[arg(long)]
-    force: bool,
+    semantics: Option<Semantics>,
+    /// Seed of parameters, starts and noise [default: 0].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Most gradient updates [default: 3000].
+    #[arg(long)]
+    updates: Option<usize>,
+    /// Stop once this fraction of a batch, and of 200 fresh samples, satisfies the spec
+    /// [default: 0.95].
+    #[arg(long)]
+    target: Option<f64>,
+    #[command(flatten)]
+    run: super::RunDirArgs,
+    /// Save a checkpoint every this many updates (and at the end).
+    #[arg(long, default_value_t = 100)]
+    save_every: usize,
+}
+
+impl TrainArgs {
+    fn restart_after(&self) -> Option<Option<usize>> {
+        self.restart_after.map(|n| (n > 0).then_some(n))
+    }
+
+    /// The settings of a new run.
+    fn settings(&self) -> Result<PlanRunSettings> {
+        let Some(task) = self.task else { bail!("--task is required for a new run") };
+        let d = CpgConfig::default();
+        let cpg = CpgConfig {
+            method: self.method.unwrap_or(d.method),
+            semantics: self.semantics.unwrap_or(d.semantics),
+            seed: self.seed.unwrap_or(d.seed),
+            planner: self.planner.unwrap_or(d.planner),
+            restart_after: self.restart_after().unwrap_or(d.restart_after),
+            ..d
+        };
+        let s = PlanRunSettings {
+            task,
+            safe_along: self.safe_along.unwrap_or(Task::point(task).safe_along),
+            cpg,
+            updates: self.updates.unwrap_or(3000),
+            target: self.target.unwrap_or(0.95),
+        };
+        check(&s)?;
+        Ok(s)
+    }
+
+    /// The saved settings with the flags that may change applied.
+    fn resumed(&self, saved: &PlanRunSettings) -> Result<PlanRunSettings> {
+        use super::differs;
+        super::refuse_conflicts(
+            RunKind::Planner,
+            &[
+                ("--task", differs(&self.task, &saved.task)),
+                ("--planner", differs(&self.planner, &saved.cpg.planner)),
+                ("--safe-along", differs(&self.safe_along, &saved.safe_along)),
+                ("--restart-after", differs(&self.restart_after(), &saved.cpg.restart_after)),
+                ("--method", differs(&self.method, &saved.cpg.method)),
+                ("--semantics", differs(&self.semantics, &saved.cpg.semantics)),
+                ("--seed", differs(&self.seed, &saved.cpg.seed)),
+            ],
+        )?;
+        let s = PlanRunSettings {
+            updates: self.updates.unwrap_or(saved.updates),
+            target: self.target.unwrap_or(saved.target),
+            ..saved.clone()
+        };
+        check(&s)?;
+        Ok(s)
+    }
+}
+
+fn check(s: &PlanRunSettings) -> Result<()> {
+    if !(0.0..=1.0).contains(&s.target) {
+        bail!("--target must be a fraction in [0, 1], got {}", s.target);
+    }
+    Ok(())
+}
+
+/// One line of a planner run's `metrics.jsonl`.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct PlanMetrics {
+    update: usize,
+    satisfaction: f64,
+    mean_rho: f64,
+    lambda: f64,
+    loss: f64,
+    /// Seconds since this process started training.
+    seconds: f64,
+    restarts: usize,
 }
 
 /// Arguments of `schrl plan sample`.
@@ -132,79 +209,67 @@ fn train(args: TrainArgs) -> Result<()> {
     if args.robot != "point" {
         bail!("planner tasks exist for the point robot only so far, not '{}'", args.robot);
     }
-    if !(0.0..=1.0).contains(&args.target) {
-        bail!("--target must be a fraction in [0, 1], got {}", args.target);
-    }
-    if !args.force && args.out.join("planner.json").exists() {
-        bail!("{} already holds a checkpoint; pass --force to replace it", args.out.display());
-    }
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
-    let metrics_path = args.out.join("metrics.jsonl");
-    let mut metrics = std::fs::File::create(&metrics_path)
-        .with_context(|| format!("cannot write {}", metrics_path.display()))?;
-    let cfg = CpgConfig {
-        method: args.method,
-        semantics: args.semantics,
-        seed: args.seed,
-        planner: args.planner,
-        restart_after: (args.restart_after > 0).then_some(args.restart_after),
-        ..CpgConfig::default()
+    let out = args.run.out.clone();
+    let (mut run, settings, resumed) = if args.run.resume {
+        let (mut run, ckpt) = RunWriter::resume(&out, RunKind::Planner).map_err(super::store_error)?;
+        let settings = args.resumed(&run.settings().map_err(super::store_error)?)?;
+        run.set_settings(&settings).map_err(super::store_error)?;
+        let resumed = if ckpt.has_files() { Some(store::planner::load_trainer(&ckpt, &settings)?) } else { None };
+        (run, settings, resumed)
+    } else {
+        let settings = args.settings()?;
+        let run = RunWriter::create(&out, RunKind::Planner, &settings, args.run.existing())
+            .map_err(super::store_error)?;
+        (run, settings, None)
     };
-    let mut task = Task::point(args.task);
-    if let Some(along) = args.safe_along {
-        task.safe_along = along;
-    }
-    let mut trainer = PlanTrainer::new(task, cfg)?;
-    let bar = ProgressBar::new(args.updates as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} updates {msg}").expect("valid template"),
-    );
+    let was_resumed = args.run.resume;
+    let (mut trainer, mut done, mut reached) = match resumed {
+        Some(r) => r,
+        None => (PlanTrainer::new(settings.task(), settings.cpg)?, 0, false),
+    };
+    crate::interrupt::install();
+    let (mut log, _) = MetricsLog::open(&run, was_resumed, |m: &PlanMetrics| m.update <= done)
+        .map_err(super::store_error)?;
+    let bar = ProgressBar::new(settings.updates as u64);
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} updates {msg}").expect("valid template"));
+    bar.set_position(done as u64);
     let start = std::time::Instant::now();
-    let mut done = 0;
-    let mut reached = false;
-    for update in 1..=args.updates {
+    let mut interrupted = false;
+    while !reached && done < settings.updates {
         let s = trainer.update()?;
-        done = update;
-        writeln!(
-            metrics,
-            "{}",
-            serde_json::json!({
-                "update": update, "satisfaction": s.satisfaction, "mean_rho": s.mean_rho,
-                "lambda": s.lambda, "loss": s.loss, "seconds": start.elapsed().as_secs_f64(),
-                "restarts": trainer.restarts(),
-            })
-        )?;
-        bar.set_position(update as u64);
+        done += 1;
+        log.append(&PlanMetrics {
+            update: done,
+            satisfaction: s.satisfaction,
+            mean_rho: s.mean_rho,
+            lambda: s.lambda,
+            loss: s.loss,
+            seconds: start.elapsed().as_secs_f64(),
+            restarts: trainer.restarts(),
+        })?;
+        bar.set_position(done as u64);
         bar.set_message(format!("satisfaction {:.2} λ {:.2}", s.satisfaction, s.lambda));
         // Confirm on fresh paths before stopping, so one lucky batch does not end training.
-        if s.satisfaction >= args.target && trainer.satisfaction(200)? >= args.target {
-            reached = true;
+        reached = s.satisfaction >= settings.target && trainer.satisfaction(200)? >= settings.target;
+        if done % args.save_every.max(1) == 0 {
+            run.save(|f| store::planner::save_into(f, &trainer, done, reached))?;
+        }
+        if crate::interrupt::requested() {
+            interrupted = true;
             break;
         }
     }
     bar.finish_and_clear();
-    let meta = PlannerMeta {
-        robot: args.robot.clone(),
-        task: args.task.name().into(),
-        method: if args.method == Method::Cpg { "cpg" } else { "pg" }.into(),
-        semantics: args.semantics.to_string(),
-        seed: args.seed,
-        updates: done,
-        lambda: trainer.lagrangian().lambda,
-        dim: trainer.planner().config().dim,
-        hidden: trainer.planner().config().hidden,
-        bound: trainer.planner().config().bound,
-        min_std: trainer.planner().config().min_std,
-        planner: args.planner.name().into(),
-        safe_along: trainer.task().safe_along.name().into(),
-    };
-    checkpoint::save(&args.out, &trainer, &meta, args.force)?;
+    run.save(|f| store::planner::save_into(f, &trainer, done, reached))?;
+    if interrupted {
+        return Err(crate::interrupt::stopped(&out, format!("update {done}")));
+    }
     let satisfaction = trainer.satisfaction(200)?;
     println!(
         "{} after {done} updates ({:.1} s); checkpoint in {}",
         if reached { "reached the target" } else { "stopped at the update limit" },
         start.elapsed().as_secs_f64(),
-        args.out.display()
+        out.display()
     );
     println!("updates: {done}");
     println!("restarts: {}", trainer.restarts());
@@ -215,7 +280,7 @@ fn train(args: TrainArgs) -> Result<()> {
 }
 
 fn sample(args: SampleArgs) -> Result<()> {
-    let loaded = checkpoint::load(&args.from.ckpt)?;
+    let loaded = store::planner::load(&args.from.ckpt).map_err(super::store_error)?;
     let task = &loaded.task;
     let mut rng = ChaCha8Rng::seed_from_u64(args.from.seed);
     let g0 = task.sample_starts(&mut rng, args.from.n)?;
@@ -247,7 +312,7 @@ fn time(args: TimeArgs) -> Result<()> {
     if args.from.n == 0 {
         bail!("--n must be at least 1");
     }
-    let loaded = checkpoint::load(&args.from.ckpt)?;
+    let loaded = store::planner::load(&args.from.ckpt).map_err(super::store_error)?;
     let task = &loaded.task;
     let spec = task.spec();
     let deployed = DeployedPlanner::from_varmap(&loaded.varmap, loaded.planner.config())?;

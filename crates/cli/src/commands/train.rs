@@ -1,107 +1,220 @@
 //! `schrl train` and `schrl eval`: joint hierarchical training of a task, and its
 //! evaluation on what the robot actually does.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use schrl::control::{ControlConfig, ControlTrainer, checkpoint as control_ckpt};
-use schrl::cpg::{CpgConfig, Method, NoControlReward, PathLengthReward, PlanTrainer};
+use schrl::control::{ControlConfig, ControlTrainer};
+use schrl::cpg::{CpgConfig, Method};
 use schrl::joint::{
-    JointConfig, JointMetrics, JointTrainer, PlanChoice, TaskEval, evaluate_task, mean_std, run_dir,
+    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, JointConfig, JointMetrics, JointRunSettings, JointTrainer, PlanChoice,
+    TaskEval, evaluate_task, mean_std,
 };
 use schrl::planner::PlannerKind;
+use schrl::pretrain::{PretrainConfig, pretrain};
+use schrl::store::{self, Existing, MetricsLog, RunKind, RunWriter};
 use schrl::tasks::{Task, TaskKind};
 use sim::Robot;
 use sim::render::{ChartPanel, Goal, PathKind, Polyline, Scene};
 use stl::Semantics;
 
-/// Arguments of `schrl train`.
+/// Arguments of `schrl train`. Flags left out take the default shown; with
+/// `--resume` they take the saved run's value, and a flag given with another value is
+/// refused (`--steps`, `--target`, `--eval-groups` and `--save-every` may change).
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
-    /// Robot: point, car, drone, or doggo (needs the `mujoco` feature).
-    #[arg(long, default_value = "point")]
-    robot: Robot,
-    /// Task: seq, cover, branch, loop, signal, or a task file (TOML).
+    /// Robot: point, car, drone, or doggo (needs the `mujoco` feature) [default: point].
     #[arg(long)]
-    task: String,
-    /// Seed of everything.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Environment steps of joint training (default: 3 M).
-    #[arg(long, default_value_t = 3_000_000)]
-    steps: usize,
-    /// Stop early once this fraction of the last 20 iterations' runs satisfy the task.
-    #[arg(long, default_value_t = 0.97)]
-    target: f64,
-    /// Warm-start the controller from this `schrl control train` run (default: train
-    /// a general controller first, into DIR/general).
+    robot: Option<Robot>,
+    /// Task: seq, cover, branch, loop, signal, or a task file (TOML). Required for a new run.
+    #[arg(long)]
+    task: Option<String>,
+    /// Seed of everything [default: 0].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Environment steps of joint training [default: 3000000].
+    #[arg(long)]
+    steps: Option<usize>,
+    /// Stop early once this fraction of the last 20 iterations' runs satisfy the task
+    /// [default: 0.97].
+    #[arg(long)]
+    target: Option<f64>,
+    /// Warm-start the controller from this `schrl control train` run (default: train a
+    /// general controller first, into DIR/general).
     #[arg(long)]
     controller: Option<PathBuf>,
-    /// Semantics of the spec in the planner's loss. Sharper than the authors' α = 2:
-    /// segment clearances are tenths of a metre, and at α = 2 the soft minimum
-    /// averages them away (Point Seq pre-training: 8 % of sampled plans satisfied
-    /// at soft:2, 60 % at soft:10 after 2000 updates).
-    #[arg(long, default_value = "soft:10")]
-    semantics: Semantics,
-    /// Planner network: gru-ode (the paper's), or gru or mlp (Fig. 6). The memoryless
-    /// MLP suits Loop, whose next corner depends on the current one alone (paper
-    /// §4.4; here it trains Loop where the GRU-ODE does not, README).
-    #[arg(long, default_value = "gru-ode")]
-    planner: PlannerKind,
-    /// Paths planned and executed per iteration.
-    #[arg(long, default_value_t = 8)]
-    plan_batch: usize,
-    /// Weight of the planner's policy-gradient term (reference: 0.1).
-    #[arg(long, default_value_t = 0.1)]
-    pg_weight: f64,
-    /// Dual step size of λ.
-    #[arg(long, default_value_t = 0.05)]
-    lambda_lr: f64,
-    /// Planner-only updates (batch 64, no execution) before joint training, all of them
-    /// (1–4 ms each); λ then restarts from 1. 3000: the planner alone needed up to
-    /// 2731 updates to satisfy Signal and 2492 for Loop (seeds 0–4, README).
-    #[arg(long, default_value_t = 3000)]
-    pretrain_updates: usize,
-    /// Planners pre-trained (from different seeds) before joint training; the one
-    /// with the shortest mean paths among those satisfying the spec is kept.
-    #[arg(long, default_value_t = 3)]
-    pretrain_candidates: usize,
-    /// Weight of the path-length stand-in for r_l while pre-training the planner
-    /// (r_l = −w · metres; the controller has not run yet). Short plans are easy to
-    /// drive: without it, Point Seq plans met the spec by detours with hairpin turns
-    /// that the controller could not follow (0 % executed; 98.6 % with 0.05).
-    #[arg(long, default_value_t = 0.05)]
-    pretrain_length_weight: f64,
-    /// Also update the planner during the joint phase (CPG on r_h = ρ + r_l from the
-    /// executed runs: Algorithm 1 in full). Off by default: the planner is trained on
-    /// the spec first and then kept, and the joint phase adapts the controller to the
-    /// task. Measured on Point Seq (1 M joint steps): planner kept 1.000 ± 0.000;
-    /// planner updated with the controller fixed 0.000 (its r_l updates, 8 runs a
-    /// batch, pull the plans off the spec faster than λ restores it).
+    /// Semantics of the spec in the planner's loss: hard, soft:<alpha> or
+    /// lse:<temperature> [default: soft:10].
+    #[arg(long)]
+    semantics: Option<Semantics>,
+    /// Planner network: gru-ode (the paper's), or the ablations gru and mlp [default: gru-ode].
+    #[arg(long)]
+    planner: Option<PlannerKind>,
+    /// Paths planned and executed per iteration [default: 8].
+    #[arg(long)]
+    plan_batch: Option<usize>,
+    /// Weight of the planner's policy-gradient term [default: 0.1].
+    #[arg(long)]
+    pg_weight: Option<f64>,
+    /// Dual step size of λ [default: 0.05].
+    #[arg(long)]
+    lambda_lr: Option<f64>,
+    /// Planner-only updates per pre-training candidate (batch 64, no execution); 0: none
+    /// [default: 3000].
+    #[arg(long)]
+    pretrain_updates: Option<usize>,
+    /// Planners pre-trained from different seeds; the shortest satisfying one is kept
+    /// [default: 3].
+    #[arg(long)]
+    pretrain_candidates: Option<usize>,
+    /// Weight of the path-length stand-in for r_l while pre-training (per metre)
+    /// [default: 0.05].
+    #[arg(long)]
+    pretrain_length_weight: Option<f64>,
+    /// Also update the planner during the joint phase on r_h = ρ + r_l from the
+    /// executed runs (off: the pre-trained planner is kept and only the controller
+    /// learns on the task).
     #[arg(long)]
     joint_planner: bool,
     /// Keep the controller fixed (ablation).
     #[arg(long)]
     freeze_controller: bool,
-    /// Metres by which the planner's goal discs are shrunk (at most a third of a radius),
-    /// so that where the controller counts a waypoint as reached lies in the goal
-    /// (default: the robot's reach radius, 0.3 m for Point). Point Loop with 0: runs
-    /// reached every waypoint yet failed the spec on the positions reached.
+    /// Metres by which the planner's goal discs are shrunk (at most a third of a radius)
+    /// [default: the robot's reach radius].
     #[arg(long)]
     goal_margin: Option<f64>,
     /// Metres of clearance the planner keeps from obstacles beyond the task's own
-    /// `safe_radius`, room for the controller's curves between waypoints. 0.1 (one
-    /// Point radius): with 0, Point Loop seeds 1 and 3 and Cover seed 2 collided in
-    /// 7–10 % of runs passing wall ends; with 0.1 they satisfied 0.996, 1.000, 1.000.
-    #[arg(long, default_value_t = 0.1)]
-    safe_margin: f64,
+    /// `safe_radius` [default: 0.1].
+    #[arg(long)]
+    safe_margin: Option<f64>,
     #[command(flatten)]
     run: super::RunDirArgs,
-    /// Evaluation groups of 100 runs after training (0: none).
-    #[arg(long, default_value_t = 5)]
-    eval_groups: usize,
+    /// Evaluation groups of 100 runs after training; 0: none [default: 5].
+    #[arg(long)]
+    eval_groups: Option<usize>,
+    /// Iterations between checkpoints [default: 50].
+    #[arg(long)]
+    save_every: Option<usize>,
+}
+
+impl TrainArgs {
+    /// The settings of a new run: the flags given, defaults for the rest.
+    fn settings(&self) -> Result<JointRunSettings> {
+        let robot = self.robot.unwrap_or(Robot::Point);
+        let Some(task_arg) = &self.task else { bail!("--task is required for a new run") };
+        let task = load_task(robot, task_arg)?;
+        let goal_margin = match self.goal_margin {
+            Some(m) => m,
+            None => sim::make_env(robot, task.map.clone())?.reach_radius(),
+        };
+        let defaults = JointConfig::default();
+        let joint = JointConfig {
+            plan_batch: self.plan_batch.unwrap_or(defaults.plan_batch),
+            goal_margin,
+            safe_margin: self.safe_margin.unwrap_or(DEFAULT_SAFE_MARGIN),
+            freeze_planner: !self.joint_planner,
+            freeze_controller: self.freeze_controller,
+            ..defaults
+        };
+        let cpg_defaults = CpgConfig::default();
+        let seed = self.seed.unwrap_or(0);
+        let cpg = CpgConfig {
+            seed,
+            semantics: self.semantics.unwrap_or(cpg_defaults.semantics),
+            method: Method::Cpg,
+            pg_weight: self.pg_weight.unwrap_or(cpg_defaults.pg_weight),
+            lambda_lr: self.lambda_lr.unwrap_or(cpg_defaults.lambda_lr),
+            planner: self.planner.unwrap_or(cpg_defaults.planner),
+            ..cpg_defaults
+        };
+        let pre = PretrainConfig::default();
+        let pretrain = PretrainConfig {
+            updates: self.pretrain_updates.unwrap_or(pre.updates),
+            candidates: self.pretrain_candidates.unwrap_or(pre.candidates),
+            length_weight: self.pretrain_length_weight.unwrap_or(pre.length_weight),
+        };
+        let s = JointRunSettings {
+            robot,
+            task_toml: task.toml.clone(),
+            task_spec: task.spec.clone(),
+            seed,
+            steps: self.steps.unwrap_or(DEFAULT_STEPS),
+            target: self.target.unwrap_or(DEFAULT_TARGET),
+            controller: self.controller.clone(),
+            joint,
+            cpg,
+            pretrain,
+            eval_groups: self.eval_groups.unwrap_or(EVAL_GROUPS),
+            save_every: self.save_every.unwrap_or(DEFAULT_SAVE_EVERY),
+        };
+        check_settings(&s)?;
+        Ok(s)
+    }
+
+    /// The saved settings of a resumed run, with the flags that may change applied;
+    /// any other flag given with a different value is refused by name.
+    fn resumed(&self, saved: &JointRunSettings) -> Result<JointRunSettings> {
+        use super::differs;
+        let task_differs = match &self.task {
+            None => false,
+            Some(t) => {
+                let task = load_task(self.robot.unwrap_or(saved.robot), t)?;
+                task.toml != saved.task_toml || task.spec != saved.task_spec
+            }
+        };
+        super::refuse_conflicts(
+            RunKind::Joint,
+            &[
+                ("--robot", differs(&self.robot, &saved.robot)),
+                ("--task", task_differs),
+                ("--seed", differs(&self.seed, &saved.seed)),
+                ("--controller", self.controller.is_some() && self.controller != saved.controller),
+                ("--semantics", differs(&self.semantics, &saved.cpg.semantics)),
+                ("--planner", differs(&self.planner, &saved.cpg.planner)),
+                ("--plan-batch", differs(&self.plan_batch, &saved.joint.plan_batch)),
+                ("--pg-weight", differs(&self.pg_weight, &saved.cpg.pg_weight)),
+                ("--lambda-lr", differs(&self.lambda_lr, &saved.cpg.lambda_lr)),
+                ("--pretrain-updates", differs(&self.pretrain_updates, &saved.pretrain.updates)),
+                ("--pretrain-candidates", differs(&self.pretrain_candidates, &saved.pretrain.candidates)),
+                ("--pretrain-length-weight", differs(&self.pretrain_length_weight, &saved.pretrain.length_weight)),
+                ("--joint-planner", self.joint_planner && saved.joint.freeze_planner),
+                ("--freeze-controller", self.freeze_controller && !saved.joint.freeze_controller),
+                ("--goal-margin", differs(&self.goal_margin, &saved.joint.goal_margin)),
+                ("--safe-margin", differs(&self.safe_margin, &saved.joint.safe_margin)),
+            ],
+        )?;
+        let s = JointRunSettings {
+            steps: self.steps.unwrap_or(saved.steps),
+            target: self.target.unwrap_or(saved.target),
+            eval_groups: self.eval_groups.unwrap_or(saved.eval_groups),
+            save_every: self.save_every.unwrap_or(saved.save_every),
+            ..saved.clone()
+        };
+        check_settings(&s)?;
+        Ok(s)
+    }
+}
+
+/// Joint-training steps when `--steps` is not given.
+const DEFAULT_STEPS: usize = 3_000_000;
+/// Early-stop satisfaction when `--target` is not given.
+const DEFAULT_TARGET: f64 = 0.97;
+/// Iterations between checkpoints when `--save-every` is not given.
+const DEFAULT_SAVE_EVERY: usize = 50;
+/// The planner's extra clearance when `--safe-margin` is not given: one Point radius
+/// (README, *Joint training results*).
+const DEFAULT_SAFE_MARGIN: f64 = 0.1;
+
+fn check_settings(s: &JointRunSettings) -> Result<()> {
+    if !(0.0..=1.0).contains(&s.target) {
+        bail!("--target must be a fraction in [0, 1], got {}", s.target);
+    }
+    if s.save_every == 0 {
+        bail!("--save-every must be at least 1");
+    }
+    s.pretrain.validate().map_err(|e| anyhow::anyhow!("--{}", e.replace("pretrain.", "pretrain-").replace('_', "-")))?;
+    Ok(())
 }
 
 /// Arguments of `schrl eval`.
@@ -111,13 +224,13 @@ pub struct EvalArgs {
     #[arg(long)]
     ckpt: PathBuf,
     /// Groups of runs.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = EVAL_GROUPS)]
     groups: usize,
     /// Runs per group.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = EVAL_PER_GROUP)]
     per_group: usize,
     /// Seed of starts and plans.
-    #[arg(long, default_value_t = 2024)]
+    #[arg(long, default_value_t = EVAL_SEED)]
     seed: u64,
     /// Picture of executed runs with their planned waypoints (PNG or SVG).
     #[arg(long)]
@@ -152,10 +265,18 @@ fn bar(len: u64, what: &str) -> Result<ProgressBar> {
     Ok(b)
 }
 
-/// Trains a general controller for `robot` into `dir` with a progress bar.
+/// The general controller for `robot` in `dir`: reused when a finished one is there
+/// (a resumed run), else trained there with a progress bar.
 fn general_controller(robot: Robot, seed: u64, dir: &Path) -> Result<ControlTrainer> {
     let mut cfg = ControlConfig::for_robot(robot);
     cfg.seed = seed;
+    if let Ok(t) = store::controller::load(dir)
+        && t.config == cfg
+        && t.finished()
+    {
+        return Ok(t);
+    }
+    let mut run = RunWriter::create(dir, RunKind::Controller, &cfg, Existing::Replace).map_err(super::store_error)?;
     let mut t = ControlTrainer::new(cfg)?;
     let b = bar(t.total_updates() as u64, "controller")?;
     while !t.finished() {
@@ -164,183 +285,44 @@ fn general_controller(robot: Robot, seed: u64, dir: &Path) -> Result<ControlTrai
         b.set_message(format!("success {}", m.success_rate.map_or("-".into(), |s| format!("{s:.2}"))));
     }
     b.finish_and_clear();
-    control_ckpt::save(dir, &t, true)?;
+    run.save(|f| store::controller::save_into(f, &t))?;
     Ok(t)
-}
-
-/// Trains `candidates` planners alone on the spec (the run's seed, then seeds derived
-/// from it), `updates` updates each with the path-length stand-in for r_l, and keeps
-/// the best: among those whose mean paths satisfy the spec from ≥ 99 % of validation
-/// starts, the shortest; else the most satisfying. While none satisfies, more
-/// candidates follow, up to three times as many; if still none does, the candidates
-/// are trained again without the safe margin (`--safe-margin`). λ then restarts at its
-/// initial value: the joint phase starts from plans that meet the spec, with the constraint
-/// slack, so the controller's return steers the planner instead of a λ inflated by
-/// the first random plans. Each candidate uses its whole budget: once the constraint
-/// is slack the length term keeps shortening the paths (Point Seq seed 0: stopping at
-/// the first satisfying batch left a detour the controller ran out of time on, 0.018
-/// of runs satisfied; the full 1000 updates, 0.958). Several candidates, because a
-/// planner can settle on a detour that no small change shortens without crossing a
-/// wall (Point Branch seed 0: a first waypoint 8 m out around the cross, 0 runs in
-/// time).
-fn pretrain_planner(
-    t: &mut JointTrainer,
-    updates: usize,
-    candidates: usize,
-    length_weight: f64,
-) -> Result<()> {
-    let sat_of = |c: &Option<(PlanTrainer, f64, f64)>| c.as_ref().map_or(0.0, |(_, s, _)| *s);
-    let widened = t.plan.task().clone();
-    let mut best = best_candidate(t.plan.config(), &widened, updates, candidates, length_weight)?;
-    // The extra clearance can leave no satisfying plan at all (Point Loop seed 2: none
-    // of 9 candidates with 0.1 m more); then plan with the task's own clearance.
-    if sat_of(&best) < SATISFYING && t.config.safe_margin > 0.0 {
-        eprintln!(
-            "planner: no candidate met the spec with {} m more clearance; planning with the task's own",
-            t.config.safe_margin
-        );
-        let own = t.task.with_goal_margin(t.config.goal_margin);
-        let fallback = best_candidate(t.plan.config(), &own, updates, candidates, length_weight)?;
-        if sat_of(&fallback) > sat_of(&best) {
-            best = fallback;
-            t.config.safe_margin = 0.0;
-        }
-    }
-    if let Some((mut plan, sat, len)) = best {
-        eprintln!("planner: kept mean paths satisfying from {sat:.3} of starts, {len:.2} m long");
-        plan.set_control_reward(Box::new(NoControlReward));
-        let init = plan.config().lambda_init;
-        plan.set_lambda(init);
-        t.plan = plan;
-    }
-    Ok(())
-}
-
-/// A candidate satisfies when its mean paths do from this fraction of the validation
-/// starts. 0.99, not 0.95: Point Loop seed 4 kept the shortest candidate above 0.95
-/// (0.960), and 10 % of its runs reached a corner outside its disc (0.896); at 0.99,
-/// 1.000. (22 of the 25 README runs kept a candidate at 1.000 either way.)
-const SATISFYING: f64 = 0.99;
-
-/// The candidates of [`pretrain_planner`] for `task`, and the one kept with its
-/// validation satisfaction and mean path length.
-fn best_candidate(
-    config: &CpgConfig,
-    task: &Task,
-    updates: usize,
-    candidates: usize,
-    length_weight: f64,
-) -> Result<Option<(PlanTrainer, f64, f64)>> {
-    const VALIDATION_STARTS: usize = 200;
-    // While no candidate satisfies, up to this many times `candidates` are tried
-    // (Point Loop seed 1: none of the first 3 met the shrunk corner discs).
-    const EXTRA_ROUNDS: usize = 3;
-    let b = bar((updates * candidates) as u64, "planner")?;
-    let mut best: Option<(PlanTrainer, f64, f64)> = None;
-    for k in 0..candidates * EXTRA_ROUNDS {
-        let best_sat = best.as_ref().map_or(0.0, |(_, s, _)| *s);
-        if k >= candidates && best_sat >= SATISFYING {
-            break;
-        }
-        b.set_length((updates * (k + 1).max(candidates)) as u64);
-        let cfg = CpgConfig { seed: config.seed.wrapping_add(k as u64 * 1_000_003), ..*config };
-        let mut plan = PlanTrainer::new(task.clone(), cfg)?;
-        plan.set_control_reward(Box::new(PathLengthReward { weight: length_weight }));
-        for i in 1..=updates {
-            let s = plan.update()?;
-            b.set_position((k * updates + i) as u64);
-            b.set_message(format!("candidate {}: plan satisfaction {:.2}", k + 1, s.satisfaction));
-        }
-        let (sat, len) =
-            (plan.mean_satisfaction(VALIDATION_STARTS)?, plan.mean_path_length(VALIDATION_STARTS)?);
-        let better = match &best {
-            None => true,
-            Some((_, s, l)) if sat >= SATISFYING && *s >= SATISFYING => len < *l,
-            Some((_, s, _)) => sat > *s,
-        };
-        if better {
-            best = Some((plan, sat, len));
-        }
-    }
-    b.finish_and_clear();
-    Ok(best)
 }
 
 /// Runs `schrl train`.
 pub fn train(args: TrainArgs) -> Result<()> {
-    if !(0.0..=1.0).contains(&args.target) {
-        bail!("--target must be a fraction in [0, 1], got {}", args.target);
-    }
-    if args.pretrain_candidates == 0 {
-        bail!("--pretrain-candidates must be at least 1");
-    }
-    if !(args.pretrain_length_weight >= 0.0 && args.pretrain_length_weight.is_finite()) {
-        bail!("--pretrain-length-weight must be a non-negative number, got {}", args.pretrain_length_weight);
-    }
     let start = std::time::Instant::now();
-    let mut trainer = if args.run.resume {
-        if !run_dir::exists(&args.run.out) {
-            bail!("--resume: {} holds no joint run", args.run.out.display());
-        }
-        run_dir::load(&args.run.out)?
+    let out = args.run.out.clone();
+    let (mut run, settings, saved) = if args.run.resume {
+        let (mut run, ckpt) = RunWriter::resume(&out, RunKind::Joint).map_err(super::store_error)?;
+        let settings = args.resumed(&run.settings().map_err(super::store_error)?)?;
+        run.set_settings(&settings).map_err(super::store_error)?;
+        let saved = if ckpt.has_files() { Some(store::joint::load_from(&ckpt)?) } else { None };
+        (run, settings, saved)
     } else {
-        if run_dir::exists(&args.run.out) && !args.run.force {
-            bail!("{} already holds a run; pass --force to replace it or --resume", args.run.out.display());
-        }
-        let task = load_task(args.robot, &args.task)?;
-        std::fs::create_dir_all(&args.run.out)
-            .with_context(|| format!("cannot create {}", args.run.out.display()))?;
-        let control = match &args.controller {
-            Some(dir) => {
-                let c = control_ckpt::load(dir)?;
-                if c.robot != args.robot {
-                    bail!("--controller {}: a {} controller, not {}", dir.display(), c.robot, args.robot);
-                }
-                c
-            }
-            None => general_controller(args.robot, args.seed, &args.run.out.join("general"))?,
-        };
-        let goal_margin = match args.goal_margin {
-            Some(m) => m,
-            None => sim::make_env(args.robot, task.map.clone())?.reach_radius(),
-        };
-        let joint = JointConfig {
-            plan_batch: args.plan_batch,
-            goal_margin,
-            safe_margin: args.safe_margin,
-            freeze_planner: !args.joint_planner,
-            freeze_controller: args.freeze_controller,
-            ..JointConfig::default()
-        };
-        let cpg = CpgConfig {
-            seed: args.seed,
-            semantics: args.semantics,
-            method: Method::Cpg,
-            pg_weight: args.pg_weight,
-            lambda_lr: args.lambda_lr,
-            planner: args.planner,
-            ..CpgConfig::default()
-        };
-        let mut t = JointTrainer::new(task, joint, cpg, control)?;
-        if args.pretrain_updates > 0 {
-            pretrain_planner(
-                &mut t,
-                args.pretrain_updates,
-                args.pretrain_candidates,
-                args.pretrain_length_weight,
-            )?;
-        }
-        t
+        let settings = args.settings()?;
+        let run = RunWriter::create(&out, RunKind::Joint, &settings, args.run.existing()).map_err(super::store_error)?;
+        (run, settings, None)
+    };
+    crate::interrupt::install();
+    // Before the first checkpoint a resumed run starts again from its settings, which
+    // repeats the same work exactly (a finished general controller is reused).
+    let resumed_from = saved.as_ref().map(|t| t.iterations);
+    let mut trainer = match saved {
+        Some(t) => t,
+        None => start_run(&settings, &mut run)?,
     };
     let done = trainer.iterations;
-    let (mut history, mut log) =
-        super::open_metrics_log(&args.run.out, args.run.resume, |m: &JointMetrics| m.iteration <= done)?;
-    let b = bar(args.steps as u64, "joint")?;
+    let (mut log, mut history) =
+        MetricsLog::open(&run, resumed_from.is_some(), |m: &JointMetrics| m.iteration <= done)
+            .map_err(super::store_error)?;
+    let b = bar(settings.steps as u64, "joint")?;
     b.set_position(trainer.env_steps as u64);
-    while trainer.env_steps < args.steps {
+    let mut interrupted = false;
+    while trainer.env_steps < settings.steps {
         let m = trainer.iterate()?;
-        writeln!(log, "{}", serde_json::to_string(&m)?)?;
-        b.set_position(m.env_steps.min(args.steps) as u64);
+        log.append(&m)?;
+        b.set_position(m.env_steps.min(settings.steps) as u64);
         history.push(m);
         let recent = &history[history.len().saturating_sub(20)..];
         let sat = recent.iter().map(|m| m.satisfaction).sum::<f64>() / recent.len() as f64;
@@ -349,16 +331,23 @@ pub fn train(args: TrainArgs) -> Result<()> {
             "satisfaction {sat:.2} (plans {plan:.2}) λ {:.2}",
             trainer.plan.lagrangian().lambda
         ));
-        if trainer.iterations % 50 == 0 {
-            run_dir::save(&args.run.out, &trainer, true)?;
+        if trainer.iterations % settings.save_every == 0 {
+            run.save(|f| store::joint::save_into(f, &trainer))?;
         }
-        if recent.len() == 20 && sat >= args.target {
+        if recent.len() == 20 && sat >= settings.target {
+            break;
+        }
+        if crate::interrupt::requested() {
+            interrupted = true;
             break;
         }
     }
     b.finish_and_clear();
-    run_dir::save(&args.run.out, &trainer, true)?;
-    save_curve(&history, &args.run.out.join("training_curve.png"))?;
+    run.save(|f| store::joint::save_into(f, &trainer))?;
+    if interrupted {
+        return Err(crate::interrupt::stopped(&out, format!("iteration {}", trainer.iterations)));
+    }
+    save_curve(&history, &out.join("training_curve.png"))?;
     println!(
         "trained {} on {} for {} iterations, {} environment steps, in {:.1} s; run in {}",
         trainer.task.robot,
@@ -366,23 +355,58 @@ pub fn train(args: TrainArgs) -> Result<()> {
         trainer.iterations,
         trainer.env_steps,
         start.elapsed().as_secs_f64(),
-        args.run.out.display()
+        out.display()
     );
-    if args.eval_groups > 0 {
+    if settings.eval_groups > 0 {
         let eval = evaluate_task(
             &trainer.task,
             trainer.plan.planner(),
             &trainer.control.controller(),
-            (args.eval_groups, 100),
+            (settings.eval_groups, EVAL_PER_GROUP),
             PlanChoice::Mean,
-            2024,
+            EVAL_SEED,
         )?;
-        let png = args.run.out.join("episodes.png");
+        let png = out.join("episodes.png");
         draw(&trainer.task, &eval, &png, true)?;
         println!("wrote {}", png.display());
         print_eval(&eval);
     }
     Ok(())
+}
+
+/// The trainer of a run that has no checkpoint yet: the warm-start controller, then
+/// planner pre-training; saves the result as the run's first checkpoint.
+fn start_run(settings: &JointRunSettings, run: &mut RunWriter) -> Result<JointTrainer> {
+    let task = settings.task()?;
+    let control = match &settings.controller {
+        Some(dir) => {
+            let c = store::controller::load(dir).map_err(super::store_error)?;
+            if c.robot != settings.robot {
+                bail!("--controller {}: a {} controller, not {}", dir.display(), c.robot, settings.robot);
+            }
+            c
+        }
+        None => general_controller(settings.robot, settings.seed, &run.dir().join("general"))?,
+    };
+    let mut t = JointTrainer::new(task, settings.joint.clone(), settings.cpg, control)?;
+    let b = bar((settings.pretrain.updates * settings.pretrain.candidates) as u64, "planner")?;
+    let kept = pretrain(&mut t, &settings.pretrain, &mut |p| {
+        b.set_length(p.total as u64);
+        b.set_position(p.done as u64);
+        b.set_message(format!("candidate {}: plan satisfaction {:.2}", p.candidate, p.satisfaction));
+    })?;
+    b.finish_and_clear();
+    if let Some(k) = kept {
+        if k.dropped_safe_margin {
+            eprintln!(
+                "planner: no candidate met the spec with {} m more clearance; planning with the task's own",
+                settings.joint.safe_margin
+            );
+        }
+        eprintln!("planner: kept mean paths satisfying from {:.3} of starts, {:.2} m long", k.satisfaction, k.length);
+    }
+    run.save(|f| store::joint::save_into(f, &t))?;
+    Ok(t)
 }
 
 /// Satisfaction of runs (orange) and of planned paths (blue), 0–1, on top; λ below;
@@ -436,7 +460,7 @@ pub fn eval(args: EvalArgs) -> Result<()> {
     if args.groups == 0 || args.per_group == 0 {
         bail!("--groups and --per-group must be at least 1");
     }
-    let t = run_dir::load(&args.ckpt)?;
+    let t = store::joint::load(&args.ckpt).map_err(super::store_error)?;
     let choice = if args.sampled_plans { PlanChoice::Sampled } else { PlanChoice::Mean };
     let e = evaluate_task(
         &t.task,

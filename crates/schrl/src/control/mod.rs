@@ -3,11 +3,10 @@
 //!
 //! Read top to bottom: [`mlp`] (the networks' kernel), [`policy`] (Gaussian actor
 //! and critic), [`normalize`] (running statistics), [`adam`], [`ppo`] (GAE, the
-//! clipped losses, the update), [`trainer`] (rollouts with random goals, evaluation),
-//! [`checkpoint`] (exact save and resume).
+//! clipped losses, the update), [`trainer`] (rollouts with random goals, evaluation).
+//! Saving and resuming is [`crate::store::controller`]'s.
 
 pub mod adam;
-pub mod checkpoint;
 pub mod mlp;
 pub mod normalize;
 pub mod policy;

@@ -147,7 +147,7 @@ impl PpoConfig {
 }
 
 /// One rollout, time-major (`[t][env]`).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RolloutBuffer {
     /// Environments.
     pub num_envs: usize,

@@ -52,6 +52,10 @@ impl ControlConfig {
     }
 }
 
+/// Seed of the episodes of a controller evaluation (this project's fixed choice, so
+/// evaluations compare).
+pub const EVAL_SEED: u64 = 12345;
+
 /// The open map a general controller trains on: `empty` for ground robots, `floor`
 /// for the Drone.
 pub fn open_map(robot: Robot) -> Map {

@@ -1,0 +1,149 @@
+//! Controller checkpoints: `controller.safetensors` (the parameters and Adam's moments
+//! as `f32` tensors `params`, `adam.m`, `adam.v`) and `controller.json` (configuration,
+//! normaliser statistics, step counts, the random stream, every environment's state).
+//! Together they restore a training run exactly: resumed training produces the same
+//! numbers as training that never stopped. A controller run (`schrl control train`)
+//! saves these two files; a joint run saves them beside the planner's.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use candle_core::{Device, Tensor};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use sim::{Map, VecEnv};
+
+use super::{Checkpoint, RunKind, SaveFiles, StoreError, invalid};
+use crate::control::adam::Adam;
+use crate::control::normalize::{RewardScaler, RunningMeanStd};
+use crate::control::policy::ActorCritic;
+use crate::control::ppo::PpoLearner;
+use crate::control::trainer::{ControlConfig, ControlTrainer, Controller, RecentOutcomes};
+
+const WEIGHTS: &str = "controller.safetensors";
+const STATE: &str = "controller.json";
+
+/// What `controller.json` holds.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct State {
+    config: ControlConfig,
+    obs_dim: usize,
+    act_dim: usize,
+    steps: usize,
+    updates: usize,
+    adam_t: u64,
+    obs_rms: RunningMeanStd,
+    reward_scaler: RewardScaler,
+    rng: ChaCha8Rng,
+    env_states: Vec<String>,
+    raw_obs: Vec<f64>,
+    episode_returns: Vec<f64>,
+    recent: RecentOutcomes,
+}
+
+/// Writes `t`'s two files into a save.
+pub fn save_into(files: &mut SaveFiles, t: &ControlTrainer) -> Result<(), StoreError> {
+    let vec = |v: &[f32]| Tensor::from_slice(v, v.len(), &Device::Cpu);
+    let tensors = [("params", &t.policy.params), ("adam.m", &t.learner.adam.m), ("adam.v", &t.learner.adam.v)]
+        .into_iter()
+        .map(|(k, v)| vec(v).map(|v| (k.to_string(), v)))
+        .collect::<Result<HashMap<String, Tensor>, _>>();
+    files.write_with(WEIGHTS, |p| tensors.and_then(|t| candle_core::safetensors::save(&t, p)))?;
+    let state = State {
+        config: t.config.clone(),
+        obs_dim: t.policy.obs_dim(),
+        act_dim: t.policy.act_dim(),
+        steps: t.steps,
+        updates: t.updates,
+        adam_t: t.learner.adam.t,
+        obs_rms: t.obs_rms.clone(),
+        reward_scaler: t.reward_scaler.clone(),
+        rng: t.rng.clone(),
+        env_states: t.envs.envs().iter().map(|e| e.save_state()).collect(),
+        raw_obs: t.raw_obs.clone(),
+        episode_returns: t.episode_returns.clone(),
+        recent: t.recent.clone(),
+    };
+    files.json(STATE, &state)
+}
+
+/// Restores the controller training state saved by [`save_into`] in `ckpt`.
+pub fn load_from(ckpt: &Checkpoint) -> Result<ControlTrainer, StoreError> {
+    let state: State = ckpt.json(STATE)?;
+    let state_path = ckpt.file(STATE)?;
+    let bad = |message: String| invalid(&state_path, message);
+    state.config.ppo.validate().map_err(&bad)?;
+    let robot: sim::Robot = state.config.robot.parse().map_err(|e: sim::EnvError| bad(e.to_string()))?;
+    let map = Map::by_name(&state.config.map).ok_or_else(|| bad(format!("unknown map '{}'", state.config.map)))?;
+
+    let weights = ckpt.file(WEIGHTS)?;
+    let tensors =
+        candle_core::safetensors::load(&weights, &Device::Cpu).map_err(|e| invalid(&weights, e.to_string()))?;
+    let get = |name: &str| -> Result<Vec<f32>, StoreError> {
+        let t = tensors.get(name).ok_or_else(|| invalid(&weights, format!("no tensor '{name}'")))?;
+        t.flatten_all().and_then(|t| t.to_vec1::<f32>()).map_err(|e| invalid(&weights, format!("{name}: {e}")))
+    };
+    let mut policy = ActorCritic::new(state.obs_dim, state.act_dim, &state.config.ppo.hidden, &mut rand::rng());
+    let params = get("params")?;
+    if params.len() != policy.params.len() {
+        return Err(invalid(
+            &weights,
+            format!(
+                "{} parameters, but a {}-{:?}-{} actor-critic has {}",
+                params.len(),
+                state.obs_dim,
+                state.config.ppo.hidden,
+                state.act_dim,
+                policy.params.len()
+            ),
+        ));
+    }
+    policy.params = params;
+    let mut learner = PpoLearner::new(state.config.ppo.clone(), &policy);
+    let (m, v) = (get("adam.m")?, get("adam.v")?);
+    if m.len() != policy.params.len() || v.len() != policy.params.len() {
+        return Err(invalid(&weights, "optimizer moments have the wrong length"));
+    }
+    learner.adam = Adam { m, v, t: state.adam_t, ..Adam::new(0) };
+
+    let n = state.config.ppo.num_envs;
+    let env_err = |e: sim::EnvError| bad(e.to_string());
+    let mut envs = VecEnv::new(robot, map, n, 0).map_err(env_err)?;
+    if envs.obs_dim() != state.obs_dim || envs.act_dim() != state.act_dim {
+        return Err(bad(format!("the {robot} does not have {} observations", state.obs_dim)));
+    }
+    if state.env_states.len() != n || state.raw_obs.len() != n * state.obs_dim || state.episode_returns.len() != n
+    {
+        return Err(bad(format!("saved state is not for {n} environments")));
+    }
+    for (e, s) in envs.envs_mut().iter_mut().zip(&state.env_states) {
+        e.restore_state(s).map_err(env_err)?;
+    }
+    ControlTrainer::from_parts(
+        state.config,
+        policy,
+        learner,
+        state.obs_rms,
+        state.reward_scaler,
+        state.rng,
+        envs,
+        state.raw_obs,
+        state.episode_returns,
+        state.recent,
+        state.steps,
+        state.updates,
+    )
+    .map_err(|e| bad(e.to_string()))
+}
+
+/// Loads the controller training run in `dir` (a `schrl control train` run), ready to
+/// continue training or to act.
+pub fn load(dir: &Path) -> Result<ControlTrainer, StoreError> {
+    load_from(&Checkpoint::open(dir, RunKind::Controller)?)
+}
+
+/// Loads only the deployable controller of the controller run in `dir`.
+pub fn load_controller(dir: &Path) -> Result<Controller, StoreError> {
+    Ok(load(dir)?.controller())
+}

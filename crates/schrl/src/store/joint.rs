@@ -1,0 +1,76 @@
+//! Joint runs (`schrl train`): the planner (`planner.safetensors`), the controller
+//! (`controller.safetensors`, `controller.json`, as a controller run saves them) and
+//! `joint.json`: the task's two files, the joint and planner settings as they stand
+//! (pre-training may have dropped the safe margin, and picks the planner's seed), λ,
+//! the planner's optimiser and random stream, the joint loop's random stream, reward
+//! scaler and partial rollout, and the counters. Together they resume a run exactly.
+
+use std::path::Path;
+
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::{Checkpoint, RunKind, SaveFiles, StoreError, controller, invalid, planner};
+use crate::control::normalize::RewardScaler;
+use crate::control::ppo::RolloutBuffer;
+use crate::cpg::{CpgConfig, PlanTrainerState};
+use crate::joint::{JointConfig, JointTrainer};
+use crate::tasks::Task;
+
+const STATE: &str = "joint.json";
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct State {
+    task_toml: String,
+    task_spec: String,
+    joint: JointConfig,
+    cpg: CpgConfig,
+    iterations: usize,
+    env_steps: usize,
+    planner: PlanTrainerState,
+    rng: ChaCha8Rng,
+    scaler: RewardScaler,
+    buffer: RolloutBuffer,
+}
+
+/// Writes the joint trainer `t` into a save.
+pub fn save_into(files: &mut SaveFiles, t: &JointTrainer) -> Result<(), StoreError> {
+    planner::save_weights(files, &t.plan)?;
+    controller::save_into(files, &t.control)?;
+    let state = State {
+        task_toml: t.task.toml.clone(),
+        task_spec: t.task.spec.clone(),
+        joint: t.config.clone(),
+        cpg: *t.plan.config(),
+        iterations: t.iterations,
+        env_steps: t.env_steps,
+        planner: t.plan.state(),
+        rng: t.rng.clone(),
+        scaler: t.scaler.clone(),
+        buffer: t.buffer.clone(),
+    };
+    files.json(STATE, &state)
+}
+
+/// Restores the joint trainer checkpointed in `ckpt`.
+pub fn load_from(ckpt: &Checkpoint) -> Result<JointTrainer, StoreError> {
+    let state: State = ckpt.json(STATE)?;
+    let path = ckpt.file(STATE)?;
+    let task = Task::from_texts(&path, &state.task_toml, &path, &state.task_spec)
+        .map_err(|e| invalid(&path, format!("task: {}", e.message)))?;
+    let control = controller::load_from(ckpt)?;
+    let mut t = JointTrainer::new(task, state.joint, state.cpg, control).map_err(|e| invalid(&path, e.to_string()))?;
+    planner::restore_trainer(ckpt, &mut t.plan, state.planner)?;
+    t.rng = state.rng;
+    t.scaler = state.scaler;
+    t.buffer = state.buffer;
+    t.iterations = state.iterations;
+    t.env_steps = state.env_steps;
+    Ok(t)
+}
+
+/// Loads the joint run in `dir`.
+pub fn load(dir: &Path) -> Result<JointTrainer, StoreError> {
+    load_from(&Checkpoint::open(dir, RunKind::Joint)?)
+}
