@@ -33,8 +33,14 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stdout(&o).contains("success rate: "), "{}", stdout(&o));
-    for f in ["controller.safetensors", "controller.json", "metrics.jsonl", "training_curve.png"] {
+    for f in ["manifest.json", "metrics.jsonl", "training_curve.png"] {
         assert!(dir.join(f).exists(), "{f} missing");
+    }
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["kind"], "controller");
+    for f in ["controller.safetensors", "controller.json"] {
+        assert!(manifest["files"][f]["sha256"].is_string(), "{f} not in the manifest");
     }
     assert_eq!(std::fs::read_to_string(dir.join("metrics.jsonl")).unwrap().lines().count(), 2);
 
@@ -53,7 +59,7 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
     assert_eq!(updates, [1, 2, 3]);
 
     let o = schrl(&["control", "train", "--resume", "--robot", "car", "--out", out]);
-    assert!(!o.status.success() && stderr(&o).contains("is a point run"), "{}", stderr(&o));
+    assert!(!o.status.success() && stderr(&o).contains("--robot differs"), "{}", stderr(&o));
 
     let png = dir.join("episodes.png");
     let o = schrl(&["control", "eval", "--ckpt", out, "--episodes", "30", "--out", png.to_str().unwrap()]);
@@ -137,18 +143,14 @@ fn joint_train_resume_and_eval_end_to_end() {
         "{}",
         stdout(&o)
     );
-    for f in [
-        "joint.json",
-        "planner.safetensors",
-        "controller/controller.json",
-        "metrics.jsonl",
-        "training_curve.png",
-        "episodes.png",
-    ] {
+    for f in ["manifest.json", "metrics.jsonl", "training_curve.png", "episodes.png"] {
         assert!(run.join(f).exists(), "{f} missing");
     }
     // The planner network is part of the run: resume and eval rebuild the MLP.
-    let meta = std::fs::read_to_string(run.join("joint.json")).unwrap();
+    let meta = std::fs::read_to_string(run.join("manifest.json")).unwrap();
+    for f in ["joint.json", "planner.safetensors", "controller.json", "controller.safetensors"] {
+        assert!(meta.contains(&format!("\"{f}\"")), "{f} not in the manifest: {meta}");
+    }
     assert!(meta.contains("\"planner\": \"mlp\""), "{meta}");
     let o = schrl(&[&args[..], &["--controller", ctl.to_str().unwrap(), "--out", run_s]].concat());
     assert!(!o.status.success() && stderr(&o).contains("--force"), "{}", stderr(&o));

@@ -25,7 +25,7 @@ fn trains_saves_refuses_to_clobber_and_samples() {
     assert!(last_value(&o, "satisfaction:") > 0.1);
     // The deployed (mean) paths do better than the noisy samples.
     assert!(last_value(&o, "mean-path satisfaction:") > last_value(&o, "satisfaction:"));
-    assert!(dir.join("planner.safetensors").exists() && dir.join("metrics.jsonl").exists());
+    assert!(dir.join("manifest.json").exists() && dir.join("metrics.jsonl").exists());
     let lines = std::fs::read_to_string(dir.join("metrics.jsonl")).unwrap();
     assert_eq!(lines.lines().count() as f64, last_value(&o, "updates:"));
     // A second run must not replace the checkpoint silently.
@@ -52,7 +52,7 @@ fn bad_arguments_are_clear_errors() {
     let o = schrl(&["plan", "train", "--task", "seq", "--safe-along", "edges", "--out", "x"]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("'edges' is not segments or waypoints"));
     let o = schrl(&["plan", "sample", "--ckpt", "/nonexistent/ckpt"]);
-    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("planner.json"));
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("/nonexistent/ckpt"));
 }
 
 #[test]
@@ -75,7 +75,7 @@ fn an_ablation_planner_round_trips_through_its_checkpoint() {
         out,
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let meta = std::fs::read_to_string(dir.join("planner.json")).unwrap();
+    let meta = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
     assert!(
         meta.contains("\"planner\": \"mlp\"") && meta.contains("\"safe_along\": \"waypoints\""),
         "{meta}"

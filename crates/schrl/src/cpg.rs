@@ -577,7 +577,10 @@ impl PlanTrainer {
     pub fn restore_state(&mut self, state: PlanTrainerState) -> Result<()> {
         let n = num_params(&self.varmap);
         if state.adam.m.len() != n || state.adam.v.len() != n {
-            candle_core::bail!("optimizer moments for {} parameters, the planner has {n}", state.adam.m.len());
+            candle_core::bail!(
+                "optimizer moments for {} parameters, the planner has {n}",
+                state.adam.m.len()
+            );
         }
         self.lagrangian.lambda = state.lambda;
         self.rng = state.rng;

@@ -21,9 +21,9 @@ use serde::{Deserialize, Serialize};
 use sim::Map;
 use stl::Predicate;
 
-use crate::store::{StoreError, write_atomic};
 use crate::control::adam::Adam;
 use crate::control::mlp::{MlpCache, TanhMlp};
+use crate::store::{StoreError, write_atomic};
 
 /// How a neural SDF is fitted.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -63,7 +63,10 @@ impl PretrainConfig {
             return Err("pretrain.candidates must be at least 1".into());
         }
         if !(self.length_weight >= 0.0 && self.length_weight.is_finite()) {
-            return Err(format!("pretrain.length_weight must be a non-negative number, got {}", self.length_weight));
+            return Err(format!(
+                "pretrain.length_weight must be a non-negative number, got {}",
+                self.length_weight
+            ));
         }
         Ok(())
     }
@@ -89,7 +92,10 @@ pub struct Pretrained {
     pub satisfaction: f64,
     /// Mean length of those paths (metres).
     pub length: f64,
-    /// Whether the safe margin was dropped (no candidate satisfied with it).
+    /// Whether candidates were trained again with the task's own clearance (none
+    /// satisfied with the safe margin).
+    pub retried_without_safe_margin: bool,
+    /// Whether the kept planner is one of those (the run's `safe_margin` is then 0).
     pub dropped_safe_margin: bool,
 }
 
@@ -108,7 +114,8 @@ pub fn pretrain(
     let base = *t.plan.config();
     let mut best = best_candidate(&base, &widened, cfg, progress)?;
     let mut dropped = false;
-    if sat_of(&best) < SATISFYING && t.config.safe_margin > 0.0 {
+    let retried = sat_of(&best) < SATISFYING && t.config.safe_margin > 0.0;
+    if retried {
         let own = t.task.with_goal_margin(t.config.goal_margin);
         let fallback = best_candidate(&base, &own, cfg, progress)?;
         if sat_of(&fallback) > sat_of(&best) {
@@ -123,7 +130,12 @@ pub fn pretrain(
         let init = plan.config().lambda_init;
         plan.set_lambda(init);
         t.plan = plan;
-        Pretrained { satisfaction: c.satisfaction, length: c.length, dropped_safe_margin: dropped }
+        Pretrained {
+            satisfaction: c.satisfaction,
+            length: c.length,
+            retried_without_safe_margin: retried,
+            dropped_safe_margin: dropped,
+        }
     }))
 }
 

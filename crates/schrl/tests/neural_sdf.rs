@@ -75,7 +75,7 @@ fn saves_loads_and_refuses_bad_files() {
     let _ = std::fs::remove_file(&path);
     net.save(&path, false).unwrap();
     assert_eq!(NeuralSdf::load(&path).unwrap(), net);
-    assert!(net.save(&path, false).unwrap_err().to_string().contains("--force"));
+    assert!(net.save(&path, false).unwrap_err().to_string().contains("already exists"));
     net.save(&path, true).unwrap();
     // A truncated parameter list is named as such, with the file.
     let mut bad = net.clone();

@@ -2,11 +2,11 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
+use schrl::cpg::{CpgConfig, Lagrangian, Method, PlanTrainer, seeded_init};
+use schrl::planner::{PathPlanner, PlannerConfig};
 use schrl::store::planner::PlanRunSettings;
 use schrl::store::{self, Checkpoint, Existing, RunKind, RunWriter};
 use schrl::tasks::SafeAlong;
-use schrl::cpg::{CpgConfig, Lagrangian, Method, PlanTrainer, seeded_init};
-use schrl::planner::{PathPlanner, PlannerConfig};
 use schrl::tasks::{Task, TaskKind};
 
 fn tiny_planner(seed: u64) -> PathPlanner {

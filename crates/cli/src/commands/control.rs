@@ -161,8 +161,8 @@ fn train(args: TrainArgs) -> Result<()> {
     };
     crate::interrupt::install();
     let updates = trainer.updates;
-    let (mut log, mut history) =
-        MetricsLog::open(&run, resumed, |m: &ControlMetrics| m.update <= updates).map_err(super::store_error)?;
+    let (mut log, mut history) = MetricsLog::open(&run, resumed, |m: &ControlMetrics| m.update <= updates)
+        .map_err(super::store_error)?;
     let total = trainer.total_updates();
     let bar = ProgressBar::new(total as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} updates {elapsed_precise} {msg}")?);
@@ -206,8 +206,13 @@ fn train(args: TrainArgs) -> Result<()> {
     );
     if args.eval_episodes > 0 {
         let map = parse_map(&trainer.config.map)?;
-        let r =
-            evaluate(&trainer.controller(), &map, args.eval_episodes, EVAL_SEED, trainer.config.episode_steps)?;
+        let r = evaluate(
+            &trainer.controller(),
+            &map,
+            args.eval_episodes,
+            EVAL_SEED,
+            trainer.config.episode_steps,
+        )?;
         print_eval(&r);
     }
     Ok(())

@@ -7,13 +7,13 @@ use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use schrl::store::planner::PlanRunSettings;
-use schrl::store::{self, MetricsLog, RunKind, RunWriter};
 use schrl::cpg::{CpgConfig, Method, PlanTrainer};
 use schrl::deployed::{DeployedPlanner, PlanScratch};
 use schrl::gradient_planner::{self, GradientPlannerConfig};
 use schrl::joint::mean_std;
 use schrl::planner::PlannerKind;
+use schrl::store::planner::PlanRunSettings;
+use schrl::store::{self, MetricsLog, RunKind, RunWriter};
 use schrl::tasks::{SafeAlong, Task, TaskKind};
 use sim::render::{Goal, PathKind, Polyline, Scene};
 use stl::Semantics;
@@ -214,7 +214,8 @@ fn train(args: TrainArgs) -> Result<()> {
         let (mut run, ckpt) = RunWriter::resume(&out, RunKind::Planner).map_err(super::store_error)?;
         let settings = args.resumed(&run.settings().map_err(super::store_error)?)?;
         run.set_settings(&settings).map_err(super::store_error)?;
-        let resumed = if ckpt.has_files() { Some(store::planner::load_trainer(&ckpt, &settings)?) } else { None };
+        let resumed =
+            if ckpt.has_files() { Some(store::planner::load_trainer(&ckpt, &settings)?) } else { None };
         (run, settings, resumed)
     } else {
         let settings = args.settings()?;
@@ -231,7 +232,9 @@ fn train(args: TrainArgs) -> Result<()> {
     let (mut log, _) = MetricsLog::open(&run, was_resumed, |m: &PlanMetrics| m.update <= done)
         .map_err(super::store_error)?;
     let bar = ProgressBar::new(settings.updates as u64);
-    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} updates {msg}").expect("valid template"));
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} updates {msg}").expect("valid template"),
+    );
     bar.set_position(done as u64);
     let start = std::time::Instant::now();
     let mut interrupted = false;

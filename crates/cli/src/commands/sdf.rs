@@ -76,7 +76,7 @@ fn fit(args: FitArgs) -> Result<()> {
     let cfg = SdfFitConfig { steps: args.steps, seed: args.seed, ..SdfFitConfig::default() };
     let start = std::time::Instant::now();
     let (net, report) = NeuralSdf::fit(&map, &cfg).map_err(anyhow::Error::msg)?;
-    net.save(&args.out, args.force)?;
+    net.save(&args.out, args.force).map_err(super::store_error)?;
     println!(
         "fitted the {} map's distance in {:.1} s ({} steps, final loss {:.5}); saved {}",
         map.name(),

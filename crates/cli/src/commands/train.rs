@@ -8,8 +8,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use schrl::control::{ControlConfig, ControlTrainer};
 use schrl::cpg::{CpgConfig, Method};
 use schrl::joint::{
-    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, JointConfig, JointMetrics, JointRunSettings, JointTrainer, PlanChoice,
-    TaskEval, evaluate_task, mean_std,
+    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, JointConfig, JointMetrics, JointRunSettings, JointTrainer,
+    PlanChoice, TaskEval, evaluate_task, mean_std,
 };
 use schrl::planner::PlannerKind;
 use schrl::pretrain::{PretrainConfig, pretrain};
@@ -177,7 +177,10 @@ impl TrainArgs {
                 ("--lambda-lr", differs(&self.lambda_lr, &saved.cpg.lambda_lr)),
                 ("--pretrain-updates", differs(&self.pretrain_updates, &saved.pretrain.updates)),
                 ("--pretrain-candidates", differs(&self.pretrain_candidates, &saved.pretrain.candidates)),
-                ("--pretrain-length-weight", differs(&self.pretrain_length_weight, &saved.pretrain.length_weight)),
+                (
+                    "--pretrain-length-weight",
+                    differs(&self.pretrain_length_weight, &saved.pretrain.length_weight),
+                ),
                 ("--joint-planner", self.joint_planner && saved.joint.freeze_planner),
                 ("--freeze-controller", self.freeze_controller && !saved.joint.freeze_controller),
                 ("--goal-margin", differs(&self.goal_margin, &saved.joint.goal_margin)),
@@ -213,7 +216,9 @@ fn check_settings(s: &JointRunSettings) -> Result<()> {
     if s.save_every == 0 {
         bail!("--save-every must be at least 1");
     }
-    s.pretrain.validate().map_err(|e| anyhow::anyhow!("--{}", e.replace("pretrain.", "pretrain-").replace('_', "-")))?;
+    s.pretrain
+        .validate()
+        .map_err(|e| anyhow::anyhow!("--{}", e.replace("pretrain.", "pretrain-").replace('_', "-")))?;
     Ok(())
 }
 
@@ -276,7 +281,8 @@ fn general_controller(robot: Robot, seed: u64, dir: &Path) -> Result<ControlTrai
     {
         return Ok(t);
     }
-    let mut run = RunWriter::create(dir, RunKind::Controller, &cfg, Existing::Replace).map_err(super::store_error)?;
+    let mut run =
+        RunWriter::create(dir, RunKind::Controller, &cfg, Existing::Replace).map_err(super::store_error)?;
     let mut t = ControlTrainer::new(cfg)?;
     let b = bar(t.total_updates() as u64, "controller")?;
     while !t.finished() {
@@ -301,7 +307,8 @@ pub fn train(args: TrainArgs) -> Result<()> {
         (run, settings, saved)
     } else {
         let settings = args.settings()?;
-        let run = RunWriter::create(&out, RunKind::Joint, &settings, args.run.existing()).map_err(super::store_error)?;
+        let run = RunWriter::create(&out, RunKind::Joint, &settings, args.run.existing())
+            .map_err(super::store_error)?;
         (run, settings, None)
     };
     crate::interrupt::install();
@@ -397,13 +404,16 @@ fn start_run(settings: &JointRunSettings, run: &mut RunWriter) -> Result<JointTr
     })?;
     b.finish_and_clear();
     if let Some(k) = kept {
-        if k.dropped_safe_margin {
+        if k.retried_without_safe_margin {
             eprintln!(
                 "planner: no candidate met the spec with {} m more clearance; planning with the task's own",
                 settings.joint.safe_margin
             );
         }
-        eprintln!("planner: kept mean paths satisfying from {:.3} of starts, {:.2} m long", k.satisfaction, k.length);
+        eprintln!(
+            "planner: kept mean paths satisfying from {:.3} of starts, {:.2} m long",
+            k.satisfaction, k.length
+        );
     }
     run.save(|f| store::joint::save_into(f, &t))?;
     Ok(t)

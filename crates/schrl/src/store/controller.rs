@@ -45,10 +45,11 @@ struct State {
 /// Writes `t`'s two files into a save.
 pub fn save_into(files: &mut SaveFiles, t: &ControlTrainer) -> Result<(), StoreError> {
     let vec = |v: &[f32]| Tensor::from_slice(v, v.len(), &Device::Cpu);
-    let tensors = [("params", &t.policy.params), ("adam.m", &t.learner.adam.m), ("adam.v", &t.learner.adam.v)]
-        .into_iter()
-        .map(|(k, v)| vec(v).map(|v| (k.to_string(), v)))
-        .collect::<Result<HashMap<String, Tensor>, _>>();
+    let tensors =
+        [("params", &t.policy.params), ("adam.m", &t.learner.adam.m), ("adam.v", &t.learner.adam.v)]
+            .into_iter()
+            .map(|(k, v)| vec(v).map(|v| (k.to_string(), v)))
+            .collect::<Result<HashMap<String, Tensor>, _>>();
     files.write_with(WEIGHTS, |p| tensors.and_then(|t| candle_core::safetensors::save(&t, p)))?;
     let state = State {
         config: t.config.clone(),
@@ -75,16 +76,20 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<ControlTrainer, StoreError> {
     let bad = |message: String| invalid(&state_path, message);
     state.config.ppo.validate().map_err(&bad)?;
     let robot: sim::Robot = state.config.robot.parse().map_err(|e: sim::EnvError| bad(e.to_string()))?;
-    let map = Map::by_name(&state.config.map).ok_or_else(|| bad(format!("unknown map '{}'", state.config.map)))?;
+    let map =
+        Map::by_name(&state.config.map).ok_or_else(|| bad(format!("unknown map '{}'", state.config.map)))?;
 
     let weights = ckpt.file(WEIGHTS)?;
-    let tensors =
-        candle_core::safetensors::load(&weights, &Device::Cpu).map_err(|e| invalid(&weights, e.to_string()))?;
+    let tensors = candle_core::safetensors::load(&weights, &Device::Cpu)
+        .map_err(|e| invalid(&weights, e.to_string()))?;
     let get = |name: &str| -> Result<Vec<f32>, StoreError> {
         let t = tensors.get(name).ok_or_else(|| invalid(&weights, format!("no tensor '{name}'")))?;
-        t.flatten_all().and_then(|t| t.to_vec1::<f32>()).map_err(|e| invalid(&weights, format!("{name}: {e}")))
+        t.flatten_all()
+            .and_then(|t| t.to_vec1::<f32>())
+            .map_err(|e| invalid(&weights, format!("{name}: {e}")))
     };
-    let mut policy = ActorCritic::new(state.obs_dim, state.act_dim, &state.config.ppo.hidden, &mut rand::rng());
+    let mut policy =
+        ActorCritic::new(state.obs_dim, state.act_dim, &state.config.ppo.hidden, &mut rand::rng());
     let params = get("params")?;
     if params.len() != policy.params.len() {
         return Err(invalid(
@@ -113,7 +118,9 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<ControlTrainer, StoreError> {
     if envs.obs_dim() != state.obs_dim || envs.act_dim() != state.act_dim {
         return Err(bad(format!("the {robot} does not have {} observations", state.obs_dim)));
     }
-    if state.env_states.len() != n || state.raw_obs.len() != n * state.obs_dim || state.episode_returns.len() != n
+    if state.env_states.len() != n
+        || state.raw_obs.len() != n * state.obs_dim
+        || state.episode_returns.len() != n
     {
         return Err(bad(format!("saved state is not for {n} environments")));
     }

@@ -60,7 +60,8 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<JointTrainer, StoreError> {
     let task = Task::from_texts(&path, &state.task_toml, &path, &state.task_spec)
         .map_err(|e| invalid(&path, format!("task: {}", e.message)))?;
     let control = controller::load_from(ckpt)?;
-    let mut t = JointTrainer::new(task, state.joint, state.cpg, control).map_err(|e| invalid(&path, e.to_string()))?;
+    let mut t = JointTrainer::new(task, state.joint, state.cpg, control)
+        .map_err(|e| invalid(&path, e.to_string()))?;
     planner::restore_trainer(ckpt, &mut t.plan, state.planner)?;
     t.rng = state.rng;
     t.scaler = state.scaler;

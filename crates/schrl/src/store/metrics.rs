@@ -34,7 +34,8 @@ impl MetricsLog {
         covered: impl Fn(&T) -> bool,
     ) -> Result<(Self, Vec<T>), StoreError> {
         let path = run.dir().join(METRICS);
-        let history: Vec<T> = if resume { read(&path)?.into_iter().filter(|m| covered(m)).collect() } else { vec![] };
+        let history: Vec<T> =
+            if resume { read(&path)?.into_iter().filter(|m| covered(m)).collect() } else { vec![] };
         let mut text = Vec::new();
         for m in &history {
             serde_json::to_writer(&mut text, m).map_err(|e| io(&path, e))?;

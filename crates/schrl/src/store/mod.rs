@@ -156,13 +156,17 @@ pub enum StoreError {
     #[error("{0} is not a schrl run directory (it has no {MANIFEST})")]
     NotARun(PathBuf),
     /// The directory has files but no manifest: it is not ours to write into.
-    #[error("{0} is not empty and is not a schrl run directory (no {MANIFEST}); choose an empty or new directory")]
+    #[error(
+        "{0} is not empty and is not a schrl run directory (no {MANIFEST}); choose an empty or new directory"
+    )]
     Foreign(PathBuf),
     /// The run has not saved a checkpoint yet.
     #[error("{0} has no checkpoint yet (the run stopped before its first save)")]
     NoCheckpoint(PathBuf),
     /// A file's contents do not match the manifest.
-    #[error("{path}: checksum {found} does not match the manifest's {expected} (a file from another run or save?)")]
+    #[error(
+        "{path}: checksum {found} does not match the manifest's {expected} (a file from another run or save?)"
+    )]
     Checksum {
         /// The file.
         path: PathBuf,
@@ -240,7 +244,10 @@ fn read_manifest(dir: &Path) -> Result<Option<Manifest>, StoreError> {
     };
     let m: Manifest = serde_json::from_str(&text).map_err(|e| invalid(&path, e.to_string()))?;
     if m.format != FORMAT {
-        return Err(invalid(&path, format!("run-directory format {} is not {FORMAT}, which this schrl reads", m.format)));
+        return Err(invalid(
+            &path,
+            format!("run-directory format {} is not {FORMAT}, which this schrl reads", m.format),
+        ));
     }
     Ok(Some(m))
 }
@@ -290,14 +297,19 @@ impl Checkpoint {
 
     /// The path of the checkpoint's file `name`, after checking its checksum.
     pub fn file(&self, name: &str) -> Result<PathBuf, StoreError> {
-        let generation = self.manifest.generation.ok_or_else(|| StoreError::NoCheckpoint(self.dir.clone()))?;
+        let generation =
+            self.manifest.generation.ok_or_else(|| StoreError::NoCheckpoint(self.dir.clone()))?;
         let path = gen_dir(&self.dir, generation).join(name);
         let expected = self.manifest.files.get(name).ok_or_else(|| {
             invalid(&self.dir.join(MANIFEST), format!("the checkpoint has no file '{name}'"))
         })?;
         let found = digest(&path)?;
         if found.sha256 != expected.sha256 {
-            return Err(StoreError::Checksum { path, expected: expected.sha256.clone(), found: found.sha256 });
+            return Err(StoreError::Checksum {
+                path,
+                expected: expected.sha256.clone(),
+                found: found.sha256,
+            });
         }
         Ok(path)
     }
@@ -380,8 +392,10 @@ impl RunWriter {
     ) -> Result<Self, StoreError> {
         fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
         let foreign = |dir: &Path| -> Result<(), StoreError> {
-            let has_files =
-                fs::read_dir(dir).map_err(|e| io(dir, e))?.filter_map(|e| e.ok()).any(|e| e.file_name() != LOCK);
+            let has_files = fs::read_dir(dir)
+                .map_err(|e| io(dir, e))?
+                .filter_map(|e| e.ok())
+                .any(|e| e.file_name() != LOCK);
             if has_files { Err(StoreError::Foreign(dir.to_path_buf())) } else { Ok(()) }
         };
         // Checked before locking, so no lock file is left in a foreign directory, and
@@ -451,7 +465,10 @@ impl RunWriter {
     }
 
     /// Saves a checkpoint: `write` writes its files, then the save commits as a whole.
-    pub fn save(&mut self, write: impl FnOnce(&mut SaveFiles) -> Result<(), StoreError>) -> Result<(), StoreError> {
+    pub fn save(
+        &mut self,
+        write: impl FnOnce(&mut SaveFiles) -> Result<(), StoreError>,
+    ) -> Result<(), StoreError> {
         let next = self.manifest.generation.map_or(0, |g| g + 1);
         let partial = self.dir.join(format!(".gen-{next}.partial"));
         if partial.exists() {

@@ -106,7 +106,12 @@ pub fn load(dir: &Path) -> Result<LoadedPlanner, StoreError> {
     if meta.planner.dim != task.map.dim() {
         return Err(invalid(
             &meta_path,
-            format!("plan dimension {} does not match the {} task's {}", meta.planner.dim, meta.task.name(), task.map.dim()),
+            format!(
+                "plan dimension {} does not match the {} task's {}",
+                meta.planner.dim,
+                meta.task.name(),
+                task.map.dim()
+            ),
         ));
     }
     let varmap = VarMap::new();
@@ -120,10 +125,14 @@ pub fn load(dir: &Path) -> Result<LoadedPlanner, StoreError> {
 
 /// The trainer of the planner run checkpointed in `ckpt` with `settings`, restored
 /// exactly; with the updates done and whether the target was reached.
-pub fn load_trainer(ckpt: &Checkpoint, settings: &PlanRunSettings) -> Result<(PlanTrainer, usize, bool), StoreError> {
+pub fn load_trainer(
+    ckpt: &Checkpoint,
+    settings: &PlanRunSettings,
+) -> Result<(PlanTrainer, usize, bool), StoreError> {
     let meta: PlannerMeta = ckpt.json(STATE)?;
     let meta_path = ckpt.file(STATE)?;
-    let mut trainer = PlanTrainer::new(settings.task(), settings.cpg).map_err(|e| invalid(&meta_path, e.to_string()))?;
+    let mut trainer =
+        PlanTrainer::new(settings.task(), settings.cpg).map_err(|e| invalid(&meta_path, e.to_string()))?;
     restore_trainer(ckpt, &mut trainer, meta.trainer)?;
     Ok((trainer, meta.updates, meta.reached))
 }
