@@ -97,7 +97,7 @@ fn kill_and_resume(dir: &Path, args: &[&str], resume: &[&str], check: &[&str], k
 const CONTROL: [&str; 9] =
     ["control", "train", "--robot", "point", "--steps", "36000", "--save-every", "1", "--eval-episodes"];
 
-fn control_args<'a>(out: &'a str) -> Vec<&'a str> {
+fn control_args(out: &str) -> Vec<&str> {
     let mut a = CONTROL.to_vec();
     a.extend(["0", "--out", out]);
     a

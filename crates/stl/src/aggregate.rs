@@ -206,7 +206,11 @@ fn query_blocks<M: Copy>(
     hi: usize,
     combine: impl Fn(M, M) -> M,
 ) -> M {
-    if lo / w == hi / w { if lo % w == 0 { pre[hi] } else { suf[lo] } } else { combine(suf[lo], pre[hi]) }
+    if lo / w == hi / w {
+        if lo.is_multiple_of(w) { pre[hi] } else { suf[lo] }
+    } else {
+        combine(suf[lo], pre[hi])
+    }
 }
 
 /// The window of a temporal operator with interval `[a, b]` (`b = None`: to the end)

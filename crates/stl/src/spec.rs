@@ -302,7 +302,7 @@ impl Spec {
         if steps == 0 {
             return Err(EvalError::Empty);
         }
-        if per == 0 || len % per != 0 {
+        if per == 0 || !len.is_multiple_of(per) {
             return Err(EvalError::BatchShape { len, steps, dim: self.state_dim });
         }
         Ok(per)
@@ -410,7 +410,7 @@ impl Evaluator<'_> {
         if path.is_empty() {
             return Err(EvalError::Empty);
         }
-        if dim == 0 || path.len() % dim != 0 {
+        if dim == 0 || !path.len().is_multiple_of(dim) {
             return Err(EvalError::Shape { len: path.len(), dim });
         }
         Ok(path.len() / dim)

@@ -111,7 +111,7 @@ impl PpoConfig {
         if self.num_envs == 0 {
             return bad("num_envs", "must be at least 1");
         }
-        if self.rollout == 0 || self.rollout % self.num_envs != 0 {
+        if self.rollout == 0 || !self.rollout.is_multiple_of(self.num_envs) {
             return bad("rollout", &format!("must be a positive multiple of num_envs ({})", self.num_envs));
         }
         if self.minibatch == 0 || self.minibatch > self.rollout {
