@@ -137,7 +137,7 @@ pub const PROMISING: f64 = 0.5;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CpgConfig {
-    /// Paths per update (the speed target uses 64).
+    /// Paths per update (64; the update-time benchmark's batch).
     pub batch: usize,
     /// Adam learning rate (not given by the reference; 3e-3 trains every task here).
     pub lr: f64,

@@ -3,7 +3,7 @@
 //!
 //! Why not candle here: one update on 64 paths is a few hundred small tensor ops per
 //! waypoint (two GRU passes, their backward, the heads), and candle's dispatch and
-//! allocation made it 8–25 ms (Seq–Signal), against the 5 ms. Here the
+//! allocation made it 8–25 ms (Seq–Signal), against a 5 ms target. Here the
 //! forward runs once: the reparameterised term and the score-function term read the
 //! same activations (their inputs agree in value; only where the gradient may flow
 //! differs), and the backward carries the two hidden-state gradients side by side.

@@ -90,7 +90,7 @@ pub enum SafeAlong {
     /// Along the straight segment that arrives at each waypoint (from the one
     /// before it), the path the controller is asked to drive. The default: with
     /// clearance checked at waypoints only, planned segments cut through the walls
-    /// and every executed run on the walls map collided (measured, issue 7).
+    /// and every executed run on the walls map collided (measured).
     #[default]
     Segments,
     /// At the waypoints only: the paper's literal `□ safe(map)` on the plan's states.
@@ -375,7 +375,7 @@ impl Task {
     /// reached anywhere within `margin` of it. A waypoint deep in the disc keeps the
     /// reach circle (mostly) inside the goal, so the spec holds on the positions the
     /// robot actually reached (Point Loop: plans into the 0.6 m corner discs, reached
-    /// within the 0.3 m reach radius, failed the spec on what the robot did; issue 7).
+    /// within the 0.3 m reach radius, failed the spec on what the robot did).
     /// The cap keeps plans trainable: Point Loop seed 0, 3000 planner updates, shrunk
     /// by 0.3 m never satisfied a batch; by 0.2 m, 96 % of sampled plans after 1500.
     pub fn with_goal_margin(&self, margin: f64) -> Task {
@@ -388,7 +388,7 @@ impl Task {
 
     /// The task with `safe` keeping `margin` more clearance from obstacles: the task
     /// a planner plans for when a controller drives curves, not the straight segments
-    /// between waypoints. Point Loop seeds 1 and 3 (issue 7): plans passed a wall end
+    /// between waypoints. Point Loop seeds 1 and 3: plans passed a wall end
     /// at the robot's own radius, and the controller's arc past it hit the wall in
     /// 8–10 % of runs.
     pub fn with_safe_margin(&self, margin: f64) -> Task {

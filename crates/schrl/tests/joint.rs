@@ -153,7 +153,7 @@ fn negative_or_infinite_planning_margins_are_refused_by_name() {
 
 #[test]
 fn reached_positions_that_cut_a_wall_corner_do_not_fail_a_collision_free_run() {
-    // Regression (issue 7, Point Branch seed 2): the straight segment between two
+    // Regression (Point Branch seed 2): the straight segment between two
     // positions where waypoints were reached is not what the robot drove (its
     // trajectory is checked for collisions at every step), so a run is judged with
     // `safe` at those positions only.

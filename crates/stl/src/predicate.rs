@@ -326,7 +326,7 @@ impl Predicate for AvoidBoxes {
 /// the first term is `min(⊥, ∅) = −k`, a floor on the until's robustness: with the
 /// paper's `k = 1` any loop body violated by more than 1 m sits on that floor, where
 /// the robustness has no gradient, and the Signal planner never trains (0 of 5 seeds;
-/// 3 of 3 with `k = 100`, issue 6).
+/// 3 of 3 with `k = 100`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AfterStep {
     /// First step at which the predicate holds.

@@ -125,7 +125,7 @@ fn batches_equal_single_paths() {
     }
 }
 
-/// Regression (issue 6, Signal 0/5 seeds): with a counter of `±1`, `φ U counter`
+/// Regression (Signal trained on 0/5 seeds): with a counter of `±1`, `φ U counter`
 /// floored at `−1` and gave the loop body `φ` no gradient once `φ < −1`. With `⊥`
 /// below every value of `φ`, the until reads `φ` and its gradient reaches it.
 #[test]

@@ -4,7 +4,7 @@
 //! Why not candle here: PPO runs tens of thousands of tiny (≤ 100 × 64 × 64) matrix
 //! products per second, where candle's per-op dispatch and allocation dominate. A
 //! 64-64 PPO minibatch step measured 3.3–3.9 ms in candle against 0.5–0.7 ms written
-//! by hand (issue 5; `cargo bench -p schrl --bench ppo` repeats the comparison). The
+//! by hand (`cargo bench -p schrl --bench ppo` repeats the comparison). The
 //! products go through `matrixmultiply` (SIMD micro-kernels) and `tanh` through a
 //! vectorisable rational approximation ([`fast_tanh`]). candle remains the
 //! checkpoint format (SafeTensors) and the autodiff oracle the tests compare with.
