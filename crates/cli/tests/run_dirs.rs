@@ -75,6 +75,13 @@ fn kill_and_resume(dir: &Path, args: &[&str], resume: &[&str], check: &[&str], k
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut child = spawn(args);
     let mut landed = 0;
+    // The first kill waits for the run to claim its directory: before that, there
+    // is nothing to resume and the command would rightly refuse.
+    let start = Instant::now();
+    while !dir.join("manifest.json").exists() {
+        assert!(child.try_wait().unwrap().is_none() && start.elapsed() < Duration::from_secs(60));
+        std::thread::sleep(Duration::from_millis(5));
+    }
     for _ in 0..kills {
         std::thread::sleep(Duration::from_millis(rng.random_range(50..900)));
         if child.try_wait().unwrap().is_some() {
