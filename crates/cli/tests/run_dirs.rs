@@ -9,17 +9,17 @@ use std::time::{Duration, Instant};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-fn command(args: &[&str]) -> Command {
+fn command<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_schrl"));
     c.env("RAYON_NUM_THREADS", "1").args(args);
     c
 }
 
-fn schrl(args: &[&str]) -> Output {
+fn schrl<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
     command(args).output().expect("runs")
 }
 
-fn spawn(args: &[&str]) -> Child {
+fn spawn<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Child {
     command(args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().expect("starts")
 }
 
@@ -71,7 +71,14 @@ fn sigint(child: &Child) {
 /// that the directory loads with `check` (or has no checkpoint yet), resuming with
 /// `resume` each time; then resumes to the end. At least two kills must land before
 /// the run ends, or the test would not test anything.
-fn kill_and_resume(dir: &Path, args: &[&str], resume: &[&str], check: &[&str], kills: usize, seed: u64) {
+fn kill_and_resume<S: AsRef<std::ffi::OsStr>>(
+    dir: &Path,
+    args: &[S],
+    resume: &[&str],
+    check: &[&str],
+    kills: usize,
+    seed: u64,
+) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut child = spawn(args);
     let mut landed = 0;
@@ -99,6 +106,26 @@ fn kill_and_resume(dir: &Path, args: &[&str], resume: &[&str], check: &[&str], k
     let o = child.wait_with_output().unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(landed >= 2, "only {landed} kills landed before the run ended");
+}
+
+/// A one-update controller run in `out`.
+fn tiny_controller(out: &Path, seed: u64) {
+    let seed = seed.to_string();
+    let o = schrl(&[
+        "control",
+        "train",
+        "--robot",
+        "point",
+        "--seed",
+        &seed,
+        "--steps",
+        "4000",
+        "--eval-episodes",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
 }
 
 const CONTROL: [&str; 9] =
@@ -186,19 +213,7 @@ fn directories_of_another_kind_and_foreign_files_are_refused_by_name() {
     let dir = temp("kinds");
     let ctrl = dir.join("controller");
     let c = ctrl.to_str().unwrap();
-    let o = schrl(&[
-        "control",
-        "train",
-        "--robot",
-        "point",
-        "--steps",
-        "4000",
-        "--eval-episodes",
-        "0",
-        "--out",
-        c,
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    tiny_controller(&ctrl, 0);
     let before = files(&ctrl);
 
     // Every other command refuses the controller run, naming both kinds.
@@ -240,21 +255,7 @@ fn directories_of_another_kind_and_foreign_files_are_refused_by_name() {
 
     // A checkpoint file replaced by another run's is named with both checksums.
     let other = dir.join("other");
-    let o = schrl(&[
-        "control",
-        "train",
-        "--robot",
-        "point",
-        "--seed",
-        "1",
-        "--steps",
-        "4000",
-        "--eval-episodes",
-        "0",
-        "--out",
-        other.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    tiny_controller(&other, 1);
     let name = |d: &Path| d.join(format!("gen-{}/controller.safetensors", generation(d).unwrap()));
     std::fs::copy(name(&other), name(&ctrl)).unwrap();
     let o = schrl(&["control", "eval", "--ckpt", c, "--episodes", "1"]);
@@ -273,14 +274,11 @@ fn plan_train_killed_or_interrupted_resumes_bit_for_bit() {
             .chain([out.to_str().unwrap().to_string()])
             .collect()
     };
-    let strs = |v: &[String]| v.iter().map(String::as_str).collect::<Vec<_>>().join("\u{1}");
-    let run = |v: Vec<String>| -> Output { schrl(&strs(&v).split('\u{1}').collect::<Vec<_>>()) };
-    let o = run(args(&straight));
+    let o = schrl(&args(&straight));
     assert!(o.status.success(), "{}", stderr(&o));
 
     let k = killed.to_str().unwrap();
     let a = args(&killed);
-    let a: Vec<&str> = a.iter().map(String::as_str).collect();
     kill_and_resume(
         &killed,
         &a,
@@ -292,7 +290,6 @@ fn plan_train_killed_or_interrupted_resumes_bit_for_bit() {
     assert_eq!(files(&killed), files(&straight));
 
     let a = args(&stopped);
-    let a: Vec<&str> = a.iter().map(String::as_str).collect();
     let mut child = spawn(&a);
     wait_for_generation(&mut child, &stopped, 2);
     sigint(&child);
@@ -314,19 +311,7 @@ fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
     let dir = temp("joint");
     let ctrl = dir.join("controller");
     let c = ctrl.to_str().unwrap();
-    let o = schrl(&[
-        "control",
-        "train",
-        "--robot",
-        "point",
-        "--steps",
-        "4000",
-        "--eval-episodes",
-        "0",
-        "--out",
-        c,
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    tiny_controller(&ctrl, 0);
     let args = |out: &str| -> Vec<String> {
         [
             "train",
@@ -354,14 +339,12 @@ fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
         .collect()
     };
     let (straight, killed, stopped) = (dir.join("straight"), dir.join("killed"), dir.join("stopped"));
-    let a = args(straight.to_str().unwrap());
-    let o = schrl(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    let o = schrl(&args(straight.to_str().unwrap()));
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(manifest(&straight)["settings"]["pretrain"]["updates"] == 20);
 
     let k = killed.to_str().unwrap();
     let a = args(k);
-    let a: Vec<&str> = a.iter().map(String::as_str).collect();
     kill_and_resume(
         &killed,
         &a,
@@ -374,7 +357,6 @@ fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
 
     let s = stopped.to_str().unwrap();
     let a = args(s);
-    let a: Vec<&str> = a.iter().map(String::as_str).collect();
     let mut child = spawn(&a);
     wait_for_generation(&mut child, &stopped, 2);
     sigint(&child);

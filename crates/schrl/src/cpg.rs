@@ -260,8 +260,8 @@ fn num_params(varmap: &VarMap) -> usize {
     varmap.all_vars().iter().map(|v| v.elem_count()).sum()
 }
 
-/// The variables of `varmap` in name order: the layout of the flat parameter vector
-/// Adam sees on the autodiff path.
+/// The variables of `varmap` in name order: the order of seeded initialisation and the
+/// layout of the flat parameter vector Adam sees on the autodiff path.
 fn vars_by_name(varmap: &VarMap) -> Vec<candle_core::Var> {
     let data = varmap.data().lock().expect("varmap lock");
     let mut named: Vec<(&String, &candle_core::Var)> = data.iter().collect();
@@ -308,11 +308,7 @@ pub struct PlanTrainerState {
 /// (candle's own CPU initialisers are not seedable).
 pub fn seeded_init(varmap: &VarMap, seed: u64) -> Result<()> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let data = varmap.data().lock().expect("varmap lock");
-    let mut names: Vec<&String> = data.keys().collect();
-    names.sort();
-    for name in names {
-        let var = &data[name];
+    for var in vars_by_name(varmap) {
         let dims = var.dims();
         let fan_in = if dims.len() >= 2 { dims[1] } else { dims[0] };
         let k = 1.0 / (fan_in as f64).sqrt();

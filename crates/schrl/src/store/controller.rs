@@ -72,7 +72,7 @@ pub fn save_into(files: &mut SaveFiles, t: &ControlTrainer) -> Result<(), StoreE
 /// Restores the controller training state saved by [`save_into`] in `ckpt`.
 pub fn load_from(ckpt: &Checkpoint) -> Result<ControlTrainer, StoreError> {
     let state: State = ckpt.json(STATE)?;
-    let state_path = ckpt.file(STATE)?;
+    let state_path = ckpt.path_of(STATE);
     let bad = |message: String| invalid(&state_path, message);
     state.config.ppo.validate().map_err(&bad)?;
     let robot: sim::Robot = state.config.robot.parse().map_err(|e: sim::EnvError| bad(e.to_string()))?;

@@ -56,7 +56,7 @@ pub fn save_into(files: &mut SaveFiles, t: &JointTrainer) -> Result<(), StoreErr
 /// Restores the joint trainer checkpointed in `ckpt`.
 pub fn load_from(ckpt: &Checkpoint) -> Result<JointTrainer, StoreError> {
     let state: State = ckpt.json(STATE)?;
-    let path = ckpt.file(STATE)?;
+    let path = ckpt.path_of(STATE);
     let task = Task::from_texts(&path, &state.task_toml, &path, &state.task_spec)
         .map_err(|e| invalid(&path, format!("task: {}", e.message)))?;
     let control = controller::load_from(ckpt)?;

@@ -207,8 +207,12 @@ fn digest(path: &Path) -> Result<FileEntry, StoreError> {
         h.update(&buf[..n]);
         bytes += n as u64;
     }
-    let sha256 = h.finalize().iter().map(|b| format!("{b:02x}")).collect();
-    Ok(FileEntry { sha256, bytes })
+    Ok(FileEntry { sha256: hex(&h.finalize()), bytes })
+}
+
+/// Lowercase hex, as `sha256sum` prints a digest.
+fn hex(digest: &[u8]) -> String {
+    digest.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 fn sync_dir(dir: &Path) -> Result<(), StoreError> {
@@ -295,30 +299,44 @@ impl Checkpoint {
             .map_err(|e| invalid(&self.dir.join(MANIFEST), format!("settings: {e}")))
     }
 
+    /// Where the checkpoint's file `name` lies, unchecked (to name it in messages).
+    pub fn path_of(&self, name: &str) -> PathBuf {
+        gen_dir(&self.dir, self.manifest.generation.unwrap_or(0)).join(name)
+    }
+
+    /// The manifest's entry for `name`.
+    fn entry(&self, name: &str) -> Result<&FileEntry, StoreError> {
+        if self.manifest.generation.is_none() {
+            return Err(StoreError::NoCheckpoint(self.dir.clone()));
+        }
+        self.manifest
+            .files
+            .get(name)
+            .ok_or_else(|| invalid(&self.dir.join(MANIFEST), format!("the checkpoint has no file '{name}'")))
+    }
+
+    fn check(&self, name: &str, expected: &FileEntry, found: String) -> Result<(), StoreError> {
+        if found == expected.sha256 {
+            return Ok(());
+        }
+        Err(StoreError::Checksum { path: self.path_of(name), expected: expected.sha256.clone(), found })
+    }
+
     /// The path of the checkpoint's file `name`, after checking its checksum.
     pub fn file(&self, name: &str) -> Result<PathBuf, StoreError> {
-        let generation =
-            self.manifest.generation.ok_or_else(|| StoreError::NoCheckpoint(self.dir.clone()))?;
-        let path = gen_dir(&self.dir, generation).join(name);
-        let expected = self.manifest.files.get(name).ok_or_else(|| {
-            invalid(&self.dir.join(MANIFEST), format!("the checkpoint has no file '{name}'"))
-        })?;
-        let found = digest(&path)?;
-        if found.sha256 != expected.sha256 {
-            return Err(StoreError::Checksum {
-                path,
-                expected: expected.sha256.clone(),
-                found: found.sha256,
-            });
-        }
+        let expected = self.entry(name)?;
+        let path = self.path_of(name);
+        self.check(name, expected, digest(&path)?.sha256)?;
         Ok(path)
     }
 
-    /// The checkpoint's JSON file `name`, checked and parsed.
+    /// The checkpoint's JSON file `name`, read once, checked and parsed.
     pub fn json<T: DeserializeOwned>(&self, name: &str) -> Result<T, StoreError> {
-        let path = self.file(name)?;
-        let text = fs::read_to_string(&path).map_err(|e| io(&path, e))?;
-        serde_json::from_str(&text).map_err(|e| invalid(&path, e.to_string()))
+        let expected = self.entry(name)?;
+        let path = self.path_of(name);
+        let bytes = fs::read(&path).map_err(|e| io(&path, e))?;
+        self.check(name, expected, hex(&Sha256::digest(&bytes)))?;
+        serde_json::from_slice(&bytes).map_err(|e| invalid(&path, e.to_string()))
     }
 }
 

@@ -69,7 +69,7 @@ pub fn save_into(
     updates: usize,
     reached: bool,
 ) -> Result<(), StoreError> {
-    files.write_with(WEIGHTS, |p| trainer.varmap().save(p))?;
+    save_weights(files, trainer)?;
     let task = trainer.task();
     let kind: TaskKind = task.name.parse().map_err(|e: String| invalid(Path::new(STATE), e))?;
     let meta = PlannerMeta {
@@ -100,7 +100,7 @@ pub struct LoadedPlanner {
 pub fn load(dir: &Path) -> Result<LoadedPlanner, StoreError> {
     let ckpt = Checkpoint::open(dir, RunKind::Planner)?;
     let meta: PlannerMeta = ckpt.json(STATE)?;
-    let meta_path = ckpt.file(STATE)?;
+    let meta_path = ckpt.path_of(STATE);
     let mut task = Task::point(meta.task);
     task.safe_along = meta.safe_along;
     if meta.planner.dim != task.map.dim() {
@@ -130,7 +130,7 @@ pub fn load_trainer(
     settings: &PlanRunSettings,
 ) -> Result<(PlanTrainer, usize, bool), StoreError> {
     let meta: PlannerMeta = ckpt.json(STATE)?;
-    let meta_path = ckpt.file(STATE)?;
+    let meta_path = ckpt.path_of(STATE);
     let mut trainer =
         PlanTrainer::new(settings.task(), settings.cpg).map_err(|e| invalid(&meta_path, e.to_string()))?;
     restore_trainer(ckpt, &mut trainer, meta.trainer)?;
