@@ -1,6 +1,6 @@
 //! One constrained policy-gradient update of the GRU-ODE planner on a batch of 64
 //! sampled paths, per Point task: sampling, robustness and its gradient, the
-//! hand-written backward ([`schrl::gru_ode_backprop`]), Adam and the dual step.
+//! hand-written backward ([`schrl::plan::gru_ode_backprop`]), Adam and the dual step.
 //! For comparison, the same update of the plain-GRU ablation, which trains through
 //! candle's autodiff (as the GRU-ODE did before).
 //!
@@ -10,9 +10,9 @@
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use schrl::cpg::{CpgConfig, PlanTrainer};
-use schrl::planner::PlannerKind;
-use schrl::tasks::{Task, TaskKind};
+use schrl::plan::cpg::{CpgConfig, PlanTrainer};
+use schrl::plan::planner::PlannerKind;
+use schrl::task::{Task, TaskKind};
 
 fn cpg_update(c: &mut Criterion) {
     let mut g = c.benchmark_group("cpg_update_b64");

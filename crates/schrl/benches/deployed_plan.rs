@@ -1,6 +1,6 @@
 //! One deployed plan: the mean path of a trained-shape GRU-ODE planner (hidden 64)
-//! from one start, in plain Rust ([`schrl::deployed::DeployedPlanner`]) and, for
-//! comparison, through candle ([`schrl::planner::PathPlanner::mean_path`]).
+//! from one start, in plain Rust ([`schrl::plan::deployed::DeployedPlanner`]) and, for
+//! comparison, through candle ([`schrl::plan::planner::PathPlanner::mean_path`]).
 //!
 //! Run: `cargo bench -p schrl --bench deployed_plan` (figures in BENCHMARKS.md). The
 //! weights are a seeded initialisation: the arithmetic per waypoint does not depend on
@@ -11,9 +11,9 @@ use std::time::Duration;
 
 use candle_core::{Device, Tensor};
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use schrl::cpg::{CpgConfig, PlanTrainer};
-use schrl::deployed::{DeployedPlanner, PlanScratch};
-use schrl::tasks::{Task, TaskKind};
+use schrl::plan::cpg::{CpgConfig, PlanTrainer};
+use schrl::plan::deployed::{DeployedPlanner, PlanScratch};
+use schrl::task::{Task, TaskKind};
 
 fn deployed_plan(c: &mut Criterion) {
     let mut g = c.benchmark_group("deployed_plan");

@@ -9,10 +9,10 @@ use candle_nn::{AdamW, Module, Optimizer, ParamsAdamW, VarBuilder, VarMap};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use schrl::control::adam::Adam;
 use schrl::control::policy::{ActorCritic, PolicyCache};
 use schrl::control::ppo::{Minibatch, loss_and_grad};
 use schrl::control::{ControlConfig, ControlTrainer, PpoConfig};
+use schrl::nn::adam::Adam;
 use sim::Robot;
 
 const BATCH: usize = 256;

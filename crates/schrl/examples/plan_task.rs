@@ -5,8 +5,8 @@
 
 use std::time::Instant;
 
-use schrl::cpg::{CpgConfig, Method, PlanTrainer};
-use schrl::tasks::{Task, TaskKind};
+use schrl::plan::cpg::{CpgConfig, Method, PlanTrainer};
+use schrl::task::{Task, TaskKind};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

@@ -1,28 +1,24 @@
-//! Learning in schrl: tasks, the GRU-ODE planning policy, and the
-//! specification-constrained policy gradient (paper §3).
+//! Learning in schrl: tasks, planners, the controller, joint training, run directories.
 //!
-//! * [`tasks`] — the five task types for Point with their specs and goals.
-//! * [`planner`] — the GRU-ODE Gaussian planner (Eq. 3).
-//! * [`cpg`] — the constrained policy gradient with a Lagrange multiplier (Eq. 4).
-//! * [`deployed`] — a trained planner's mean path in plain Rust, no autodiff (deployment).
-//! * [`gradient_planner`] — the gradient planner baseline (waypoints optimised directly).
-//! * [`neural_sdf`] — MLP signed distances fitted to a map, as STL predicates.
-//! * [`control`] — the goal-conditioned PPO controller.
-//! * [`execute`] — driving the robot through a plan's waypoints; satisfaction of what it did.
-//! * [`joint`] — joint training of planner and controller, task evaluation.
+//! The rooms, in the order data flows through them (each depends only on those before):
+//!
+//! * [`task`] — tasks as data (spec, goals, map, plan length), their validation, the
+//!   map-clearance and neural-SDF predicates, start and noise sampling.
+//! * [`nn`] — the small-network kernels shared by planner, controller and neural SDF:
+//!   a tanh MLP with its backward pass, Adam.
+//! * [`plan`] — planners: the GRU-ODE network and its ablations, the constrained policy
+//!   gradient (paper §3.2), the hand-written GRU-ODE update, pre-training on the spec,
+//!   the deployed (autodiff-free) planner, the gradient-planner baseline.
+//! * [`control`] — the goal-conditioned PPO controller (paper §3.3).
+//! * [`run`] — executing plans with a controller: the waypoint dispatcher, joint
+//!   training (paper App. A), evaluation over groups of runs.
 //! * [`store`] — run directories: manifest, atomic checkpoints, lock, metrics log.
 
 #![warn(missing_docs)]
 
 pub mod control;
-pub mod cpg;
-pub mod deployed;
-pub mod execute;
-pub mod gradient_planner;
-pub mod gru_ode_backprop;
-pub mod joint;
-pub mod neural_sdf;
-pub mod planner;
-pub mod pretrain;
+pub mod nn;
+pub mod plan;
+pub mod run;
 pub mod store;
-pub mod tasks;
+pub mod task;

@@ -13,7 +13,7 @@ use sim::Robot;
 
 /// The same MLP in candle: weights as variables, `tanh` on hidden layers.
 fn candle_mlp(
-    mlp: &schrl::control::mlp::TanhMlp,
+    mlp: &schrl::nn::mlp::TanhMlp,
     params: &[f32],
     x: &Tensor,
 ) -> candle_core::Result<(Tensor, Vec<(Var, Var)>)> {

@@ -2,10 +2,10 @@
 //! hand-made runs, and a tiny joint run.
 
 use schrl::control::{ControlConfig, ControlTrainer, PpoConfig};
-use schrl::cpg::CpgConfig;
-use schrl::execute::{Dispatch, Execution, Outcome, WaypointDispatcher, executed_robustness};
-use schrl::joint::{JointConfig, JointTrainer, mean_std};
-use schrl::tasks::{Task, TaskKind};
+use schrl::plan::cpg::CpgConfig;
+use schrl::run::execute::{Dispatch, Execution, Outcome, WaypointDispatcher, executed_robustness};
+use schrl::run::joint::{JointConfig, JointTrainer, mean_std};
+use schrl::task::{Task, TaskKind};
 use sim::{Robot, Step};
 
 fn step(reached: bool, collided: bool) -> Step {

@@ -1,11 +1,11 @@
 //! Neural signed-distance predicates: the fit, saving and loading, and gradients
 //! through robustness.
 
-use schrl::neural_sdf::{NeuralSdf, SdfFitConfig};
+use schrl::task::neural_sdf::{NeuralSdf, SdfFitConfig};
 use sim::Map;
 use stl::{Predicate, Semantics, Spec};
 
-fn fitted() -> (NeuralSdf, schrl::neural_sdf::FitReport) {
+fn fitted() -> (NeuralSdf, schrl::task::neural_sdf::FitReport) {
     // A short fit: the direction is what matters here (the default fit reaches
     // 1.9 cm mean error, 99 % sign agreement; README).
     NeuralSdf::fit(&Map::by_name("walls").unwrap(), &SdfFitConfig { steps: 2000, ..Default::default() })

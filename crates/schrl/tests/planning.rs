@@ -2,12 +2,12 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use schrl::cpg::{CpgConfig, Lagrangian, Method, PlanTrainer, seeded_init};
-use schrl::planner::{PathPlanner, PlannerConfig};
+use schrl::plan::cpg::{CpgConfig, Lagrangian, Method, PlanTrainer, seeded_init};
+use schrl::plan::planner::{PathPlanner, PlannerConfig};
 use schrl::store::planner::PlanRunSettings;
 use schrl::store::{self, Checkpoint, Existing, RunKind, RunWriter};
-use schrl::tasks::SafeAlong;
-use schrl::tasks::{Task, TaskKind};
+use schrl::task::SafeAlong;
+use schrl::task::{Task, TaskKind};
 
 fn tiny_planner(seed: u64) -> PathPlanner {
     let varmap = VarMap::new();
@@ -189,7 +189,7 @@ fn mean_path_check_does_not_shift_training() {
 /// a fresh planner and after training has moved its weights.
 #[test]
 fn deployed_plans_match_candle_mean_paths() {
-    use schrl::deployed::DeployedPlanner;
+    use schrl::plan::deployed::DeployedPlanner;
     let mut trainer =
         PlanTrainer::new(Task::point(TaskKind::Seq), CpgConfig { batch: 8, ..Default::default() }).unwrap();
     let check = |trainer: &PlanTrainer| {
@@ -219,7 +219,7 @@ fn deployed_plans_match_candle_mean_paths() {
 #[test]
 fn gradient_planner_satisfies_seq_and_keeps_the_start() {
     use rand::SeedableRng;
-    use schrl::gradient_planner::{GradientPlannerConfig, plan};
+    use schrl::plan::gradient_planner::{GradientPlannerConfig, plan};
     let task = Task::point(TaskKind::Seq);
     let spec = task.spec();
     let cfg = GradientPlannerConfig::default();
@@ -241,7 +241,7 @@ fn gradient_planner_satisfies_seq_and_keeps_the_start() {
 /// GRU-ODE; the MLP has no memory, so its step depends on the current waypoint only.
 #[test]
 fn ablation_planners_sample_score_and_train() {
-    use schrl::planner::PlannerKind;
+    use schrl::plan::planner::PlannerKind;
     for kind in [PlannerKind::Gru, PlannerKind::Mlp] {
         let cfg = CpgConfig { batch: 16, planner: kind, ..Default::default() };
         let mut t = PlanTrainer::new(Task::point(TaskKind::Seq), cfg).unwrap();
@@ -263,7 +263,7 @@ fn ablation_planners_sample_score_and_train() {
         assert!(moved > 1e-3, "{kind:?}: training moved the plan by {moved}");
         // Deployment in plain Rust is for the GRU-ODE only, and says so.
         let cfg = *t.planner().config();
-        let err = schrl::deployed::DeployedPlanner::from_varmap(t.varmap(), &cfg).unwrap_err();
+        let err = schrl::plan::deployed::DeployedPlanner::from_varmap(t.varmap(), &cfg).unwrap_err();
         assert!(err.to_string().contains(kind.name()), "{err}");
     }
     // Memoryless: the MLP's next mean from a waypoint is the same whatever came before.
@@ -311,11 +311,11 @@ fn stagnation_restarts_reinitialise_deterministically() {
     assert_ne!(kept, plan, "a restart changes the planner");
 }
 
-/// The hand-written gradient of the constrained loss (`schrl::gru_ode_backprop`)
+/// The hand-written gradient of the constrained loss (`schrl::plan::gru_ode_backprop`)
 /// equals candle's autodiff of the same loss, parameter by parameter, on the Seq task.
 #[test]
 fn hand_written_update_gradient_matches_candle_autodiff() {
-    use schrl::gru_ode_backprop::{GruOdeBackprop, Source, Tape};
+    use schrl::plan::gru_ode_backprop::{GruOdeBackprop, Source, Tape};
     use stl::Semantics;
     let task = Task::point(TaskKind::Loop);
     let varmap = VarMap::new();
@@ -384,7 +384,7 @@ fn hand_written_update_gradient_matches_candle_autodiff() {
 
 #[test]
 fn path_length_gradient_matches_finite_differences_and_keeps_paths_apart() {
-    use schrl::cpg::{ControlReward, PathLengthReward};
+    use schrl::plan::cpg::{ControlReward, PathLengthReward};
     let r = PathLengthReward { weight: 0.05 };
     // Two paths of three 2-D states each: a segment never joins the end of one path
     // to the start of the next.
@@ -405,7 +405,7 @@ fn path_length_gradient_matches_finite_differences_and_keeps_paths_apart() {
 fn pathwise_length_gradient_shortens_plans_more_than_the_score_function_alone() {
     // Branch seed 0 once kept a first waypoint 8 m out, around the cross: through the
     // score function alone, the length stand-in barely moved it.
-    use schrl::cpg::{ControlReward, PathLengthReward};
+    use schrl::plan::cpg::{ControlReward, PathLengthReward};
     /// The same reward, without its gradient.
     struct ScoreOnly(PathLengthReward);
     impl ControlReward for ScoreOnly {

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use schrl::tasks::{TASK_ROBOTS, Task, TaskKind};
+use schrl::task::{TASK_ROBOTS, Task, TaskKind};
 
 fn repo_tasks() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tasks")
@@ -41,7 +41,7 @@ fn point_seq_is_the_papers_sequence() {
 }
 
 /// Writes a task pair into a fresh directory and loads it.
-fn load(toml_text: &str, spec_text: &str) -> Result<Task, schrl::tasks::TaskError> {
+fn load(toml_text: &str, spec_text: &str) -> Result<Task, schrl::task::TaskError> {
     // One directory per call: tests run in parallel and texts may share a length.
     static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);

@@ -7,14 +7,14 @@ use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use schrl::cpg::{CpgConfig, Method, PlanTrainer};
-use schrl::deployed::{DeployedPlanner, PlanScratch};
-use schrl::gradient_planner::{self, GradientPlannerConfig};
-use schrl::joint::mean_std;
-use schrl::planner::PlannerKind;
+use schrl::plan::cpg::{CpgConfig, Method, PlanTrainer};
+use schrl::plan::deployed::{DeployedPlanner, PlanScratch};
+use schrl::plan::gradient_planner::{self, GradientPlannerConfig};
+use schrl::plan::planner::PlannerKind;
+use schrl::run::joint::mean_std;
 use schrl::store::planner::PlanRunSettings;
 use schrl::store::{self, MetricsLog, RunKind, RunWriter};
-use schrl::tasks::{SafeAlong, Task, TaskKind};
+use schrl::task::{SafeAlong, Task, TaskKind};
 use sim::render::{Goal, PathKind, Polyline, Scene};
 use stl::Semantics;
 
@@ -293,7 +293,7 @@ fn sample(args: SampleArgs) -> Result<()> {
     } else {
         loaded.planner.sample(&g0, &noise)?.paths
     };
-    let rho = schrl::tasks::hard_robustness(&task.spec(), &paths)?;
+    let rho = schrl::task::hard_robustness(&task.spec(), &paths)?;
     let satisfied = rho.iter().filter(|r| **r > 0.0).count();
     if let Some(out) = &args.out {
         let mut scene = Scene::new(task.map.clone());

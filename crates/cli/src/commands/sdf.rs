@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use schrl::neural_sdf::{NeuralSdf, SdfFitConfig};
+use schrl::task::neural_sdf::{NeuralSdf, SdfFitConfig};
 use sim::Map;
 
 /// Subcommands of `schrl sdf`.
@@ -58,7 +58,7 @@ fn map_named(name: &str) -> Result<Map> {
     Map::by_name(name).ok_or_else(|| anyhow::anyhow!("unknown map '{name}': expected walls or duck"))
 }
 
-fn print_report(r: &schrl::neural_sdf::FitReport) {
+fn print_report(r: &schrl::task::neural_sdf::FitReport) {
     println!("mean abs error: {:.4}", r.mean_abs_error);
     println!("max abs error: {:.4}", r.max_abs_error);
     println!("sign agreement near surfaces: {:.4}", r.sign_agreement_near);

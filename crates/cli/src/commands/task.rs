@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use schrl::tasks::Task;
+use schrl::task::Task;
 
 /// Subcommands of `schrl task`.
 #[derive(clap::Subcommand, Debug)]

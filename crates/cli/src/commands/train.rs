@@ -6,15 +6,15 @@ use std::path::{Path, PathBuf};
 use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use schrl::control::{ControlConfig, ControlTrainer};
-use schrl::cpg::{CpgConfig, Method};
-use schrl::joint::{
+use schrl::plan::cpg::{CpgConfig, Method};
+use schrl::plan::planner::PlannerKind;
+use schrl::plan::pretrain::{PretrainConfig, pretrain};
+use schrl::run::joint::{
     EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, JointConfig, JointMetrics, JointRunSettings, JointTrainer,
     PlanChoice, TaskEval, evaluate_task, mean_std,
 };
-use schrl::planner::PlannerKind;
-use schrl::pretrain::{PretrainConfig, pretrain};
 use schrl::store::{self, Existing, MetricsLog, RunKind, RunWriter};
-use schrl::tasks::{Task, TaskKind};
+use schrl::task::{Task, TaskKind};
 use sim::Robot;
 use sim::render::{ChartPanel, Goal, PathKind, Polyline, Scene};
 use stl::Semantics;

@@ -1,13 +1,11 @@
 //! The goal-conditioned low-level controller (paper §3.3, App. K): PPO over
 //! vectorised environments of any robot.
 //!
-//! Read top to bottom: [`mlp`] (the networks' kernel), [`policy`] (Gaussian actor
-//! and critic), [`normalize`] (running statistics), [`adam`], [`ppo`] (GAE, the
-//! clipped losses, the update), [`trainer`] (rollouts with random goals, evaluation).
+//! Read top to bottom: [`policy`] (Gaussian actor and critic on [`crate::nn::mlp`]),
+//! [`normalize`] (running statistics), [`ppo`] (GAE, the clipped losses, the update
+//! with [`crate::nn::adam`]), [`trainer`] (rollouts with random goals, evaluation).
 //! Saving and resuming is [`crate::store::controller`]'s.
 
-pub mod adam;
-pub mod mlp;
 pub mod normalize;
 pub mod policy;
 pub mod ppo;

@@ -4,7 +4,7 @@
 use rand::Rng;
 use rand_distr::StandardNormal;
 
-use super::mlp::{MlpCache, TanhMlp};
+use crate::nn::mlp::{MlpCache, TanhMlp};
 
 /// ½ ln 2π, the Gaussian log-density's constant per dimension.
 pub const HALF_LN_2PI: f32 = 0.918_938_5;

@@ -8,8 +8,8 @@ use rand::Rng;
 use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
 
-use super::adam::Adam;
 use super::policy::{ActorCritic, HALF_LN_2PI, PolicyCache};
+use crate::nn::adam::Adam;
 
 /// PPO hyper-parameters. Every default names its source.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -116,7 +116,7 @@ pub struct ControlMetrics {
     pub update_s: f64,
 }
 
-/// Everything a controller training run holds; [`super::checkpoint`] saves and
+/// Everything a controller training run holds; [`crate::store::controller`] saves and
 /// restores all of it, so a resumed run continues exactly.
 pub struct ControlTrainer {
     /// The configuration.

@@ -14,11 +14,11 @@ use serde::{Deserialize, Serialize};
 use sim::{Map, VecEnv};
 
 use super::{Checkpoint, RunKind, SaveFiles, StoreError, invalid};
-use crate::control::adam::Adam;
 use crate::control::normalize::{RewardScaler, RunningMeanStd};
 use crate::control::policy::ActorCritic;
 use crate::control::ppo::PpoLearner;
 use crate::control::trainer::{ControlConfig, ControlTrainer, Controller, RecentOutcomes};
+use crate::nn::adam::Adam;
 
 const WEIGHTS: &str = "controller.safetensors";
 const STATE: &str = "controller.json";

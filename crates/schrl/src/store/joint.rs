@@ -13,9 +13,9 @@ use serde::{Deserialize, Serialize};
 use super::{Checkpoint, RunKind, SaveFiles, StoreError, controller, invalid, planner};
 use crate::control::normalize::RewardScaler;
 use crate::control::ppo::RolloutBuffer;
-use crate::cpg::{CpgConfig, PlanTrainerState};
-use crate::joint::{JointConfig, JointTrainer};
-use crate::tasks::Task;
+use crate::plan::cpg::{CpgConfig, PlanTrainerState};
+use crate::run::joint::{JointConfig, JointTrainer};
+use crate::task::Task;
 
 const STATE: &str = "joint.json";
 

@@ -10,9 +10,9 @@ use candle_nn::{VarBuilder, VarMap};
 use serde::{Deserialize, Serialize};
 
 use super::{Checkpoint, RunKind, SaveFiles, StoreError, invalid};
-use crate::cpg::{CpgConfig, PlanTrainer, PlanTrainerState};
-use crate::planner::{PathPlanner, PlannerConfig};
-use crate::tasks::{SafeAlong, Task, TaskKind};
+use crate::plan::cpg::{CpgConfig, PlanTrainer, PlanTrainerState};
+use crate::plan::planner::{PathPlanner, PlannerConfig};
+use crate::task::{SafeAlong, Task, TaskKind};
 
 const WEIGHTS: &str = "planner.safetensors";
 const STATE: &str = "planner.json";

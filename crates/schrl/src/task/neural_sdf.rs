@@ -21,8 +21,8 @@ use serde::{Deserialize, Serialize};
 use sim::Map;
 use stl::Predicate;
 
-use crate::control::adam::Adam;
-use crate::control::mlp::{MlpCache, TanhMlp};
+use crate::nn::adam::Adam;
+use crate::nn::mlp::{MlpCache, TanhMlp};
 use crate::store::{StoreError, write_atomic};
 
 /// How a neural SDF is fitted.

@@ -15,6 +15,8 @@
 //! `G[1,T] safe`. The Signal tasks of ground robots are on the empty plane, as in
 //! the reference setup (their final goal, the origin, lies inside the walls' cross).
 
+pub mod neural_sdf;
+
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -200,8 +202,8 @@ const BUILTIN: [(&str, &str, &str, &str); 20] = {
             (
                 $r,
                 $t,
-                include_str!(concat!("../../../tasks/", $r, "/", $t, ".toml")),
-                include_str!(concat!("../../../tasks/", $r, "/", $t, ".stl")),
+                include_str!(concat!("../../../../tasks/", $r, "/", $t, ".toml")),
+                include_str!(concat!("../../../../tasks/", $r, "/", $t, ".stl")),
             )
         };
     }
@@ -440,7 +442,7 @@ impl Task {
             .expect("task names are checked when the task is loaded")
     }
 
-    /// The spec a run is judged by ([`crate::execute`]): the task's spec with `safe`
+    /// The spec a run is judged by ([`crate::run::execute`]): the task's spec with `safe`
     /// at the executed path's states only. The straight segments between the
     /// positions where waypoints were reached are not what the robot drove; its
     /// actual trajectory is checked for collisions at every step, which is stronger.

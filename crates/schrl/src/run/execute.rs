@@ -7,7 +7,7 @@
 //! the task's step limit. It satisfies the task when it completed (so its whole
 //! trajectory was collision-free) and the spec holds on the *executed* path: the start
 //! followed by the robot's positions at the moments it reached each waypoint, with
-//! `safe` checked at those positions ([`crate::tasks::Task::execution_spec`]). Steps to
+//! `safe` checked at those positions ([`crate::task::Task::execution_spec`]). Steps to
 //! reach: environment steps until the last waypoint was reached.
 
 use serde::{Deserialize, Serialize};
@@ -118,7 +118,7 @@ impl WaypointDispatcher {
     }
 
     /// The run as an [`Execution`] judged by `spec` (the task's
-    /// [`crate::tasks::Task::execution_spec`]; `steps`: the task's waypoints after the
+    /// [`crate::task::Task::execution_spec`]; `steps`: the task's waypoints after the
     /// start). A run not yet over counts as timed out.
     pub fn into_execution(
         self,
@@ -170,7 +170,7 @@ impl Execution {
     }
 
     /// Environment steps until `waypoints` waypoints were reached (`None`: all of
-    /// them; see [`crate::tasks::Task::steps_to_reach_at`]), if they were.
+    /// them; see [`crate::task::Task::steps_to_reach_at`]), if they were.
     pub fn steps_to_reach(&self, waypoints: Option<usize>) -> Option<usize> {
         match waypoints {
             None if self.outcome == Outcome::Completed => Some(self.steps),

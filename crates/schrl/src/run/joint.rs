@@ -1,7 +1,7 @@
 //! Joint hierarchical training (paper App. A, Algorithm 1) and task evaluation.
 //!
 //! Each iteration samples starts, plans a batch of paths with the GRU-ODE planner,
-//! and rolls the controller out through each path's waypoints (see [`crate::execute`]).
+//! and rolls the controller out through each path's waypoints (see [`crate::run::execute`]).
 //! The low-level reward of a path, `r_l`, is the controller's return on it (distance
 //! progress plus reach bonuses) times [`JointConfig::control_weight`]; the planner is
 //! updated with the constrained policy gradient on `r_h = ρ + r_l`, and the
@@ -21,10 +21,10 @@ use crate::control::normalize::RewardScaler;
 use crate::control::policy::PolicyCache;
 use crate::control::ppo::{RolloutBuffer, UpdateStats as PpoStats};
 use crate::control::{ControlTrainer, Controller};
-use crate::cpg::{CpgConfig, PlanTrainer};
-use crate::execute::{Dispatch, Execution, Outcome, start_run};
-use crate::planner::PathPlanner;
-use crate::tasks::Task;
+use crate::plan::cpg::{CpgConfig, PlanTrainer};
+use crate::plan::planner::PathPlanner;
+use crate::run::execute::{Dispatch, Execution, Outcome, start_run};
+use crate::task::Task;
 
 /// Joint-training settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -99,7 +99,7 @@ pub struct JointRunSettings {
     /// The planner's training hyper-parameters.
     pub cpg: CpgConfig,
     /// Planner pre-training.
-    pub pretrain: crate::pretrain::PretrainConfig,
+    pub pretrain: crate::plan::pretrain::PretrainConfig,
     /// Evaluation groups of [`EVAL_PER_GROUP`] runs after training (0: none).
     pub eval_groups: usize,
     /// Iterations between checkpoints (50).
@@ -108,7 +108,7 @@ pub struct JointRunSettings {
 
 impl JointRunSettings {
     /// The task these settings train on.
-    pub fn task(&self) -> Result<Task, crate::tasks::TaskError> {
+    pub fn task(&self) -> Result<Task, crate::task::TaskError> {
         let here = std::path::Path::new("settings");
         Task::from_texts(here, &self.task_toml, here, &self.task_spec)
     }
@@ -161,7 +161,7 @@ pub struct JointTrainer {
 
 /// A run in progress, with its transitions when the controller learns.
 struct Run {
-    dispatcher: crate::execute::WaypointDispatcher,
+    dispatcher: crate::run::execute::WaypointDispatcher,
     trajectory: Vec<Vec<f64>>,
     control_return: f64,
     obs: Vec<f32>,

@@ -8,13 +8,13 @@
 //!
 //! Defaults (this project's; the paper gives none): Adam step 0.1, β (0.9, 0.999),
 //! 200 steps per attempt, 50 attempts, soft STL with α = 10 (the training semantics
-//! of [`crate::cpg::CpgConfig`]).
+//! of [`crate::plan::cpg::CpgConfig`]).
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use stl::{EvalError, Semantics, Spec};
 
-use crate::tasks::Task;
+use crate::task::Task;
 
 /// Settings of the gradient planner.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -6,7 +6,7 @@
 //! small matrix–vector products written as vectorisable loops, so a whole Seq plan
 //! takes microseconds (`cargo bench -p schrl --bench deployed_plan`, BENCHMARKS.md).
 //!
-//! The arithmetic is the one of [`crate::planner::PathPlanner::mean_path`] in `f32`
+//! The arithmetic is the one of [`crate::plan::planner::PathPlanner::mean_path`] in `f32`
 //! (PyTorch's GRU: gates r, z, n; `h' = (1 − z) n + z h`), with the sigmoid written as
 //! `(1 + tanh(x/2))/2` through [`fast_tanh`]; waypoints agree with candle's to within
 //! 1e-4 m (tested in `tests/planning.rs`).
@@ -14,8 +14,8 @@
 use candle_core::{DType, Result, Tensor};
 use candle_nn::VarMap;
 
-use crate::control::mlp::fast_tanh;
-use crate::planner::{PlannerConfig, PlannerKind};
+use crate::nn::mlp::fast_tanh;
+use crate::plan::planner::{PlannerConfig, PlannerKind};
 
 /// The mean-path part of a GRU-ODE planner, as plain arrays.
 #[derive(Clone, Debug, PartialEq)]
@@ -79,7 +79,7 @@ fn add_product(out: &mut [f32], wt: &[f32], x: &[f32]) {
 
 impl DeployedPlanner {
     /// The planner whose parameters are in `varmap` (names as
-    /// [`crate::planner::PathPlanner::new`] makes them) with shape `cfg`.
+    /// [`crate::plan::planner::PathPlanner::new`] makes them) with shape `cfg`.
     pub fn from_varmap(varmap: &VarMap, cfg: &PlannerConfig) -> Result<Self> {
         if cfg.kind != PlannerKind::GruOde {
             candle_core::bail!("only GRU-ODE planners are deployed in plain Rust, not '{}'", cfg.kind.name());
@@ -150,7 +150,7 @@ impl DeployedPlanner {
     }
 
     /// Mean paths of a batch of starts `[n, dim]`, as a `[n, steps + 1, dim]` tensor
-    /// (the shape [`crate::planner::PathPlanner::mean_path`] returns).
+    /// (the shape [`crate::plan::planner::PathPlanner::mean_path`] returns).
     pub fn mean_paths_tensor(&self, starts: &Tensor, steps: usize) -> Result<Tensor> {
         let starts: Vec<Vec<f64>> = starts.to_dtype(DType::F64)?.to_vec2()?;
         let mut all = Vec::with_capacity(starts.len() * (steps + 1) * self.dim);

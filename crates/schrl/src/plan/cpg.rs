@@ -25,10 +25,10 @@ use serde::{Deserialize, Serialize};
 use stl::Semantics;
 use stl::tensor::TensorSpec;
 
-use crate::control::adam::Adam;
-use crate::gru_ode_backprop::{GruOdeBackprop, Source, Tape};
-use crate::planner::{PathPlanner, PlanBatch, PlannerConfig, PlannerKind};
-use crate::tasks::{self, Task};
+use crate::nn::adam::Adam;
+use crate::plan::gru_ode_backprop::{GruOdeBackprop, Source, Tape};
+use crate::plan::planner::{PathPlanner, PlanBatch, PlannerConfig, PlannerKind};
+use crate::task::{self, Task};
 
 /// The dual variable of the spec constraint `ρ ≥ ε`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -406,7 +406,7 @@ impl PlanTrainer {
 
     /// Hard-semantics robustness of each path in a `[n, steps+1, dim]` tensor.
     pub fn hard_robustness(&self, paths: &Tensor) -> Result<Vec<f64>> {
-        tasks::hard_robustness(&self.hard, paths)
+        task::hard_robustness(&self.hard, paths)
     }
 
     /// One update on a fresh batch of sampled paths, with `r_l` from the configured
@@ -494,7 +494,7 @@ impl PlanTrainer {
     }
 
     /// The update of [`PlanTrainer::update_on`] for the GRU-ODE, by hand
-    /// ([`crate::gru_ode_backprop`]): the forward pass over `paths` (`[batch][steps +
+    /// ([`crate::plan::gru_ode_backprop`]): the forward pass over `paths` (`[batch][steps +
     /// 1][dim]`) is already on the tape. Same loss, same Adam, same dual step.
     fn fast_update(&mut self, paths: &[f64], rl: &[f64]) -> Result<UpdateStats> {
         let b = rl.len();

@@ -20,9 +20,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::cpg::{CpgConfig, NoControlReward, PathLengthReward, PlanTrainer};
-use crate::joint::JointTrainer;
-use crate::tasks::Task;
+use crate::plan::cpg::{CpgConfig, NoControlReward, PathLengthReward, PlanTrainer};
+use crate::run::joint::JointTrainer;
+use crate::task::Task;
 
 /// A candidate satisfies when its mean paths do from this fraction of the validation
 /// starts (Point Loop seed 4 kept a candidate at 0.960 under a 0.95 bar, and 10 % of

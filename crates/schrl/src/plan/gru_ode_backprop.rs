@@ -13,7 +13,7 @@
 //!
 //! The loss, for a batch of `B` paths with advantages `A_k` and Lagrange multiplier
 //! `λ`, is `L = −w/B Σ_k A_k log π(τ_k) − λ/B Σ_k ρ(τ_k)` evaluated at the current
-//! parameters, where the PPO-style clipped ratio of [`crate::cpg`] equals 1 and its
+//! parameters, where the PPO-style clipped ratio of [`crate::plan::cpg`] equals 1 and its
 //! gradient is the plain score function. The paths are reparameterised,
 //! `g_{i+1} = μ_i + σ_i ε_i`, so `ρ`'s gradient reaches the parameters through every
 //! waypoint; `log π` treats the path as data.
@@ -24,8 +24,8 @@
 use candle_core::{DType, Result, Tensor};
 use candle_nn::VarMap;
 
-use crate::control::mlp::{fast_tanh, gemm};
-use crate::planner::{PlannerConfig, PlannerKind};
+use crate::nn::mlp::{fast_tanh, gemm};
+use crate::plan::planner::{PlannerConfig, PlannerKind};
 
 /// Names and shapes of the planner's parameters in its `VarMap`, in the order of the
 /// flat vector.
