@@ -7,7 +7,8 @@ use rand_chacha::ChaCha8Rng;
 use schrl::control::policy::{ActorCritic, PolicyCache};
 use schrl::control::ppo::{Minibatch, loss_and_grad};
 use schrl::control::trainer::open_map;
-use schrl::control::{ControlConfig, ControlTrainer, PpoConfig, evaluate};
+use schrl::control::{ControlConfig, ControlTrainer, PpoConfig};
+use schrl::run::evaluate::evaluate_controller as evaluate;
 use schrl::store::{self, Existing, RunKind, RunWriter};
 use sim::Robot;
 

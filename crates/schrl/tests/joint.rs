@@ -3,8 +3,9 @@
 
 use schrl::control::{ControlConfig, ControlTrainer, PpoConfig};
 use schrl::plan::cpg::CpgConfig;
+use schrl::run::evaluate::mean_std;
 use schrl::run::execute::{Dispatch, Execution, Outcome, WaypointDispatcher, executed_robustness};
-use schrl::run::joint::{JointConfig, JointTrainer, mean_std};
+use schrl::run::joint::{JointConfig, JointTrainer};
 use schrl::task::{Task, TaskKind};
 use sim::{Robot, Step};
 

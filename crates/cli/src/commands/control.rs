@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use schrl::control::trainer::EVAL_SEED;
-use schrl::control::{ControlConfig, ControlMetrics, ControlTrainer, PpoConfig, evaluate};
+use schrl::control::{ControlConfig, ControlMetrics, ControlTrainer, PpoConfig};
+use schrl::run::evaluate::{ControllerEval, GoalEpisode, evaluate_controller, goal_episodes};
 use schrl::store::{self, MetricsLog, RunKind, RunWriter};
 use sim::render::{ChartPanel, Goal, PathKind, Polyline, RobotMarker, Scene};
 use sim::{Map, Robot};
@@ -206,7 +207,7 @@ fn train(args: TrainArgs) -> Result<()> {
     );
     if args.eval_episodes > 0 {
         let map = parse_map(&trainer.config.map)?;
-        let r = evaluate(
+        let r = evaluate_controller(
             &trainer.controller(),
             &map,
             args.eval_episodes,
@@ -231,7 +232,7 @@ fn save_curve(history: &[ControlMetrics], out: &Path) -> Result<()> {
     Ok(())
 }
 
-fn print_eval(r: &schrl::control::EvalResult) {
+fn print_eval(r: &ControllerEval) {
     println!("success rate: {}", r.success_rate);
     match r.mean_steps_to_reach {
         Some(s) => println!("mean steps to reach: {s:.1}"),
@@ -248,48 +249,24 @@ fn eval(args: EvalArgs) -> Result<()> {
     let controller = trainer.controller();
     let trained_map = trainer.config.map;
     let map = parse_map(args.map.as_deref().unwrap_or(&trained_map))?;
-    let r = evaluate(&controller, &map, args.episodes, args.seed, args.max_steps)?;
+    let runs = goal_episodes(&controller, &map, args.episodes, args.seed, args.max_steps)?;
+    let r = ControllerEval::of(&runs);
     if let Some(out) = &args.out {
-        draw_episodes(&controller, &map, args.seed, args.max_steps, out, args.force)?;
+        draw_episodes(&runs, &map, out, args.force)?;
         println!("wrote {}", out.display());
     }
     print_eval(&r);
     Ok(())
 }
 
-/// Draws six evaluation episodes: start, goal and the executed trajectory.
-fn draw_episodes(
-    controller: &schrl::control::Controller,
-    map: &Map,
-    seed: u64,
-    max_steps: usize,
-    out: &Path,
-    force: bool,
-) -> Result<()> {
+/// Draws six evaluation episodes: goal, executed trajectory, and the robot at the end.
+fn draw_episodes(runs: &[GoalEpisode], map: &Map, out: &Path, force: bool) -> Result<()> {
     let mut scene = Scene::new(map.clone());
-    let mut cache = Default::default();
-    for k in 0..6 {
-        let mut env = sim::make_env(controller.robot, map.clone())?;
-        env.set_max_steps(max_steps);
-        let mut obs = env.reset(sim::vec_env::member_seed(seed, k), None)?;
-        scene.goals.push(Goal { center: env.goal().to_vec(), radius: env.reach_radius() });
-        let mut points = vec![env.position().to_vec()];
-        let mut action = vec![0.0; env.action_space().dim()];
-        loop {
-            controller.act(&obs, 1, &mut cache, &mut action);
-            let (o, s) = env.step(&action)?;
-            obs = o;
-            points.push(env.position().to_vec());
-            if s.reached || s.terminated() || s.truncated {
-                break;
-            }
-        }
-        scene.robots.push(RobotMarker {
-            position: env.position().to_vec(),
-            heading: env.heading(),
-            radius: env.radius(),
-        });
-        scene.paths.push(Polyline { points, kind: PathKind::Executed });
+    for r in runs.iter().take(6) {
+        scene.goals.push(Goal { center: r.goal.clone(), radius: r.reach_radius });
+        let end = r.episode.trajectory.last().cloned().unwrap_or_default();
+        scene.robots.push(RobotMarker { position: end, heading: r.heading, radius: r.radius });
+        scene.paths.push(Polyline { points: r.episode.trajectory.clone(), kind: PathKind::Executed });
     }
     sim::render::save(&scene, out, force)?;
     Ok(())

@@ -11,7 +11,7 @@ use schrl::plan::cpg::{CpgConfig, Method, PlanTrainer};
 use schrl::plan::deployed::{DeployedPlanner, PlanScratch};
 use schrl::plan::gradient_planner::{self, GradientPlannerConfig};
 use schrl::plan::planner::PlannerKind;
-use schrl::run::joint::mean_std;
+use schrl::run::evaluate::mean_std;
 use schrl::store::planner::PlanRunSettings;
 use schrl::store::{self, MetricsLog, RunKind, RunWriter};
 use schrl::task::{SafeAlong, Task, TaskKind};

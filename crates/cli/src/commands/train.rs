@@ -9,10 +9,10 @@ use schrl::control::{ControlConfig, ControlTrainer};
 use schrl::plan::cpg::{CpgConfig, Method};
 use schrl::plan::planner::PlannerKind;
 use schrl::plan::pretrain::{PretrainConfig, pretrain};
-use schrl::run::joint::{
-    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, JointConfig, JointMetrics, JointRunSettings, JointTrainer,
-    PlanChoice, TaskEval, evaluate_task, mean_std,
+use schrl::run::evaluate::{
+    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, PlanChoice, TaskEval, evaluate_task, mean_std,
 };
+use schrl::run::joint::{JointConfig, JointMetrics, JointRunSettings, JointTrainer};
 use schrl::store::{self, Existing, MetricsLog, RunKind, RunWriter};
 use schrl::task::{Task, TaskKind};
 use sim::Robot;

@@ -13,6 +13,4 @@ pub mod trainer;
 
 pub use policy::ActorCritic;
 pub use ppo::{PpoConfig, PpoLearner};
-pub use trainer::{
-    ControlConfig, ControlError, ControlMetrics, ControlTrainer, Controller, EvalResult, evaluate,
-};
+pub use trainer::{ControlConfig, ControlError, ControlMetrics, ControlTrainer, Controller};

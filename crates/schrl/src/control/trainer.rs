@@ -102,7 +102,7 @@ pub struct ControlMetrics {
     pub goals_reached: usize,
     /// Over the last 100 settled goals: the fraction reached (a goal is settled when
     /// reached, or lost when its episode ends by collision or time-out). Optimistic
-    /// next to [`evaluate`], which gives every goal a fresh episode.
+    /// next to [`crate::run::evaluate::evaluate_controller`], which gives every goal a fresh episode.
     pub success_rate: Option<f64>,
     /// Learning rate used.
     pub lr: f64,
@@ -365,7 +365,8 @@ impl ControlTrainer {
 
 /// Standardises observations with `rms`, or only converts them when normalisation
 /// is off.
-fn normalize_obs(on: bool, rms: &RunningMeanStd, raw: &[f64], out: &mut [f32]) {
+/// Standardises raw observations with `rms` when `on`, else converts them to `f32`.
+pub(crate) fn normalize_obs(on: bool, rms: &RunningMeanStd, raw: &[f64], out: &mut [f32]) {
     if on {
         rms.normalize_into(raw, out);
     } else {
@@ -436,80 +437,4 @@ impl Controller {
             *a = *m as f64;
         }
     }
-}
-
-/// Result of [`evaluate`].
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct EvalResult {
-    /// Episodes run.
-    pub episodes: usize,
-    /// Fraction of episodes whose goal was reached (within the step limit, without
-    /// collision).
-    pub success_rate: f64,
-    /// Mean environment steps to reach the goal, over the successful episodes.
-    pub mean_steps_to_reach: Option<f64>,
-    /// Episodes ended by a collision or a fall.
-    pub collisions: usize,
-    /// Episodes that ran out of steps.
-    pub timeouts: usize,
-}
-
-/// Runs `episodes` single-goal episodes (random free start and goal on `map`,
-/// mean actions, at most `max_steps` steps each) and reports how many reach the goal.
-pub fn evaluate(
-    controller: &Controller,
-    map: &Map,
-    episodes: usize,
-    seed: u64,
-    max_steps: usize,
-) -> Result<EvalResult, ControlError> {
-    const BATCH: usize = 64;
-    let mut successes = 0usize;
-    let mut steps_sum = 0usize;
-    let mut cache = PolicyCache::default();
-    let mut done = 0usize;
-    let (mut collisions, mut timeouts) = (0, 0);
-    while done < episodes {
-        let n = BATCH.min(episodes - done);
-        let mut envs = VecEnv::new(controller.robot, map.clone(), n, sim::vec_env::member_seed(seed, done))?;
-        let od = envs.obs_dim();
-        let ad = envs.act_dim();
-        let mut obs = vec![0.0; n * od];
-        for (e, o) in envs.envs_mut().iter_mut().zip(obs.chunks_mut(od)) {
-            e.set_max_steps(max_steps);
-            e.observe(o);
-        }
-        let mut active = vec![true; n];
-        let mut actions = vec![0.0; n * ad];
-        let mut t = 0;
-        while active.iter().any(|a| *a) {
-            controller.act(&obs, n, &mut cache, &mut actions);
-            t += 1;
-            for (i, (e, o)) in envs.envs_mut().iter_mut().zip(obs.chunks_mut(od)).enumerate() {
-                if !active[i] {
-                    continue;
-                }
-                let s = e.step_into(&actions[i * ad..(i + 1) * ad], o)?;
-                if s.reached {
-                    successes += 1;
-                    steps_sum += t;
-                    active[i] = false;
-                } else if s.terminated() {
-                    collisions += 1;
-                    active[i] = false;
-                } else if s.truncated {
-                    timeouts += 1;
-                    active[i] = false;
-                }
-            }
-        }
-        done += n;
-    }
-    Ok(EvalResult {
-        episodes,
-        success_rate: successes as f64 / episodes.max(1) as f64,
-        mean_steps_to_reach: (successes > 0).then(|| steps_sum as f64 / successes as f64),
-        collisions,
-        timeouts,
-    })
 }

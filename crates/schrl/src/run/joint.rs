@@ -15,15 +15,17 @@ use candle_core::{DType, Tensor};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use sim::{Env, Robot, Step};
+use sim::{Env, Robot};
 
+use crate::control::ControlTrainer;
 use crate::control::normalize::RewardScaler;
 use crate::control::policy::PolicyCache;
 use crate::control::ppo::{RolloutBuffer, UpdateStats as PpoStats};
-use crate::control::{ControlTrainer, Controller};
+use crate::control::trainer::normalize_obs;
 use crate::plan::cpg::{CpgConfig, PlanTrainer};
-use crate::plan::planner::PathPlanner;
-use crate::run::execute::{Dispatch, Execution, Outcome, start_run};
+use crate::run::episode::{Driver, drive};
+use crate::run::evaluate::reach_steps;
+use crate::run::execute::{Execution, Outcome, start_run};
 use crate::task::Task;
 
 /// Joint-training settings.
@@ -66,14 +68,6 @@ impl Default for JointConfig {
     }
 }
 
-/// The evaluation protocol's defaults (paper §4.4: 5 groups of 100 runs); the seed of
-/// starts and plans is this project's fixed choice, so evaluations compare.
-pub const EVAL_GROUPS: usize = 5;
-/// Runs per evaluation group.
-pub const EVAL_PER_GROUP: usize = 100;
-/// Seed of evaluation starts and plans.
-pub const EVAL_SEED: u64 = 2024;
-
 /// Every setting of a `schrl train` run: what its run directory's manifest holds,
 /// and what `--resume` and `schrl eval` read back whole.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -100,7 +94,7 @@ pub struct JointRunSettings {
     pub cpg: CpgConfig,
     /// Planner pre-training.
     pub pretrain: crate::plan::pretrain::PretrainConfig,
-    /// Evaluation groups of [`EVAL_PER_GROUP`] runs after training (0: none).
+    /// Evaluation groups of [`crate::run::evaluate::EVAL_PER_GROUP`] runs after training (0: none).
     pub eval_groups: usize,
     /// Iterations between checkpoints (50).
     pub save_every: usize,
@@ -159,16 +153,85 @@ pub struct JointTrainer {
     pub env_steps: usize,
 }
 
-/// A run in progress, with its transitions when the controller learns.
-struct Run {
-    dispatcher: crate::run::execute::WaypointDispatcher,
-    trajectory: Vec<Vec<f64>>,
-    control_return: f64,
+/// The controller acting while it learns: actions sampled from the policy, each live
+/// run's transitions recorded for PPO, rewards scaled as in controller training. With
+/// `learn` off it acts with the policy's mean and records nothing.
+struct Learner<'a> {
+    control: &'a mut ControlTrainer,
+    scaler: &'a mut RewardScaler,
+    learn: bool,
+    cache: PolicyCache,
+    x: Vec<f32>,
+    actions: Vec<f32>,
+    log_probs: Vec<f32>,
+    values: Vec<f32>,
+    runs: Vec<Transitions>,
+}
+
+/// One run's transitions.
+#[derive(Default)]
+struct Transitions {
     obs: Vec<f32>,
     actions: Vec<f32>,
     log_probs: Vec<f32>,
     values: Vec<f32>,
     rewards: Vec<f32>,
+}
+
+impl Driver for Learner<'_> {
+    fn act(&mut self, raw: &[f64], live: &[bool], actions: &mut [f64]) {
+        let c = &mut *self.control;
+        let n = live.len();
+        let norm = c.config.ppo.norm_obs;
+        let od = c.policy.obs_dim();
+        if self.learn && norm {
+            let rows: Vec<f64> =
+                raw.chunks(od).zip(live).filter(|(_, l)| **l).flat_map(|(o, _)| o.iter().copied()).collect();
+            c.obs_rms.update(&rows);
+        }
+        self.x.resize(raw.len(), 0.0);
+        normalize_obs(norm, &c.obs_rms, raw, &mut self.x);
+        if self.learn {
+            let ad = c.policy.act_dim();
+            self.actions.resize(n * ad, 0.0);
+            self.log_probs.resize(n, 0.0);
+            self.values.resize(n, 0.0);
+            let cache = &mut self.cache;
+            c.policy.act(
+                &self.x,
+                n,
+                &mut c.rng,
+                cache,
+                &mut self.actions,
+                &mut self.log_probs,
+                &mut self.values,
+            );
+        } else {
+            let mean = c.policy.mean(&self.x, n, &mut self.cache);
+            self.actions.clear();
+            self.actions.extend_from_slice(mean);
+        }
+        actions.iter_mut().zip(&self.actions).for_each(|(d, s)| *d = *s as f64);
+    }
+
+    fn after_step(&mut self, live: &[bool], rewards: &mut [f64], ended: &[bool]) {
+        if !self.learn {
+            return;
+        }
+        let (od, ad) = (self.control.policy.obs_dim(), self.control.policy.act_dim());
+        for (i, run) in self.runs.iter_mut().enumerate().filter(|(i, _)| live[*i]) {
+            run.obs.extend_from_slice(&self.x[i * od..(i + 1) * od]);
+            run.actions.extend_from_slice(&self.actions[i * ad..(i + 1) * ad]);
+            run.log_probs.push(self.log_probs[i]);
+            run.values.push(self.values[i]);
+        }
+        if self.control.config.ppo.norm_reward {
+            self.scaler.scale(rewards, ended);
+        }
+        for (i, run) in self.runs.iter_mut().enumerate().filter(|(i, _)| live[*i]) {
+            run.rewards.push(rewards[i] as f32);
+        }
+    }
 }
 
 impl JointTrainer {
@@ -277,112 +340,47 @@ impl JointTrainer {
     ) -> Result<Vec<Execution>, crate::control::ControlError> {
         // Judged on the task's own goals, not the planner's shrunk ones.
         let spec = self.task.execution_spec();
-        let c = &mut self.control;
-        let (od, ad) = (c.policy.obs_dim(), c.policy.act_dim());
+        let od = self.control.policy.obs_dim();
         let n = paths.len();
         let mut raw = vec![0.0; n * od];
-        let mut runs = Vec::with_capacity(n);
+        let mut dispatchers = Vec::with_capacity(n);
         for (i, (env, path)) in self.envs.iter_mut().zip(paths).enumerate() {
             let seed: u64 = self.rng.random();
-            let d =
-                start_run(env.as_mut(), seed, path, self.task.step_limit, &mut raw[i * od..(i + 1) * od])?;
-            runs.push(Run {
-                dispatcher: d,
-                trajectory: vec![path[0].clone()],
-                control_return: 0.0,
-                obs: Vec::new(),
-                actions: Vec::new(),
-                log_probs: Vec::new(),
-                values: Vec::new(),
-                rewards: Vec::new(),
-            });
+            let obs = &mut raw[i * od..(i + 1) * od];
+            dispatchers.push(start_run(env.as_mut(), seed, path, self.task.step_limit, obs)?);
         }
-        let mut cache = PolicyCache::default();
-        let mut x = vec![0.0f32; n * od];
-        let mut actions = vec![0.0f32; n * ad];
-        let mut logp = vec![0.0f32; n];
-        let mut values = vec![0.0f32; n];
-        let mut rewards = vec![0.0f64; n];
-        let mut ended = vec![false; n];
-        let mut a = vec![0.0f64; ad];
-        let mut active: Vec<bool> = runs.iter().map(|r| r.dispatcher.outcome().is_none()).collect();
-        let norm = c.config.ppo.norm_obs;
-        while active.iter().any(|a| *a) {
-            if learn && norm {
-                let live: Vec<f64> = raw
-                    .chunks(od)
-                    .zip(&active)
-                    .filter(|(_, a)| **a)
-                    .flat_map(|(o, _)| o.iter().copied())
-                    .collect();
-                c.obs_rms.update(&live);
-            }
-            normalize(norm, &c.obs_rms, &raw, &mut x);
-            if learn {
-                c.policy.act(&x, n, &mut c.rng, &mut cache, &mut actions, &mut logp, &mut values);
-            } else {
-                actions.copy_from_slice(c.policy.mean(&x, n, &mut cache));
-            }
-            for (i, env) in self.envs.iter_mut().enumerate() {
-                ended[i] = false;
-                rewards[i] = 0.0;
-                if !active[i] {
-                    continue;
-                }
-                a.iter_mut().zip(&actions[i * ad..(i + 1) * ad]).for_each(|(d, s)| *d = *s as f64);
-                let obs = &mut raw[i * od..(i + 1) * od];
-                let step: Step = env.step_into(&a, obs)?;
-                let run = &mut runs[i];
-                run.trajectory.push(env.position().to_vec());
-                run.control_return += step.reward;
-                rewards[i] = step.reward;
-                if learn {
-                    run.obs.extend_from_slice(&x[i * od..(i + 1) * od]);
-                    run.actions.extend_from_slice(&actions[i * ad..(i + 1) * ad]);
-                    run.log_probs.push(logp[i]);
-                    run.values.push(values[i]);
-                }
-                match run.dispatcher.after_step(&step, env.position()) {
-                    Dispatch::Continue => {}
-                    Dispatch::NewGoal(g) => {
-                        env.set_goal(&g)?;
-                        env.observe(obs);
-                    }
-                    Dispatch::Done(_) => {
-                        active[i] = false;
-                        ended[i] = true;
-                    }
-                }
-            }
-            if learn {
-                if c.config.ppo.norm_reward {
-                    self.scaler.scale(&mut rewards, &ended);
-                }
-                for (i, run) in runs.iter_mut().enumerate() {
-                    if run.rewards.len() < run.values.len() {
-                        run.rewards.push(rewards[i] as f32);
-                    }
-                }
-            }
-        }
+        let mut learner = Learner {
+            control: &mut self.control,
+            scaler: &mut self.scaler,
+            learn,
+            cache: PolicyCache::default(),
+            x: Vec::new(),
+            actions: Vec::new(),
+            log_probs: Vec::new(),
+            values: Vec::new(),
+            runs: (0..n).map(|_| Transitions::default()).collect(),
+        };
+        let episodes = drive(&mut self.envs[..n], dispatchers, &mut raw, &mut learner)?;
+        let Learner { runs: transitions, mut cache, .. } = learner;
+        let c = &self.control;
         let gamma = c.config.ppo.gamma as f32;
         let mut out = Vec::with_capacity(n);
-        for (i, run) in runs.into_iter().enumerate() {
+        for (i, (run, t)) in episodes.into_iter().zip(transitions).enumerate() {
             let outcome = run.dispatcher.outcome().unwrap_or(Outcome::TimedOut);
-            if learn && !run.values.is_empty() {
-                let mut rewards = run.rewards;
+            if learn && !t.values.is_empty() {
+                let mut rewards = t.rewards;
                 if outcome == Outcome::TimedOut {
                     // Bootstrap the cut: r + γ V(s_final).
                     let mut xf = vec![0.0f32; od];
-                    normalize(norm, &c.obs_rms, &raw[i * od..(i + 1) * od], &mut xf);
+                    normalize_obs(c.config.ppo.norm_obs, &c.obs_rms, &raw[i * od..(i + 1) * od], &mut xf);
                     let v = c.policy.value(&xf, 1, &mut cache)[0];
                     *rewards.last_mut().expect("non-empty run") += gamma * v;
                 }
-                let len = run.values.len();
-                self.buffer.obs.extend(run.obs);
-                self.buffer.actions.extend(run.actions);
-                self.buffer.log_probs.extend(run.log_probs);
-                self.buffer.values.extend(run.values);
+                let len = t.values.len();
+                self.buffer.obs.extend(t.obs);
+                self.buffer.actions.extend(t.actions);
+                self.buffer.log_probs.extend(t.log_probs);
+                self.buffer.values.extend(t.values);
                 self.buffer.rewards.extend(rewards);
                 self.buffer.ends.extend((0..len).map(|k| k + 1 == len));
             }
@@ -398,135 +396,7 @@ impl JointTrainer {
     }
 }
 
-fn normalize(on: bool, rms: &crate::control::normalize::RunningMeanStd, raw: &[f64], out: &mut [f32]) {
-    if on {
-        rms.normalize_into(raw, out);
-    } else {
-        out.iter_mut().zip(raw).for_each(|(o, r)| *o = *r as f32);
-    }
-}
-
-/// Steps to reach of a satisfying run under `task`'s count.
-fn reach_steps(run: &Execution, task: &Task) -> f64 {
-    run.steps_to_reach(task.steps_to_reach_at).unwrap_or(run.steps) as f64
-}
-
 /// A `[n, T+1, dim]` tensor as nested vectors.
 pub fn paths_of(t: &Tensor) -> candle_core::Result<Vec<Vec<Vec<f64>>>> {
     t.to_dtype(DType::F64)?.to_vec3()
-}
-
-/// Satisfaction and steps to reach over groups of runs (the paper's protocol: 5
-/// groups of 100), mean ± sample std over the groups.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct TaskEval {
-    /// Satisfaction of each group.
-    pub satisfaction: Vec<f64>,
-    /// Mean steps to reach of each group (over its satisfying runs).
-    pub steps_to_reach: Vec<f64>,
-    /// Runs ended by a collision, over all groups.
-    pub collisions: usize,
-    /// Runs ended by a fall (legged robots), over all groups.
-    #[serde(default)]
-    pub falls: usize,
-    /// Runs that timed out.
-    pub timeouts: usize,
-    /// A few runs, for pictures.
-    pub examples: Vec<Execution>,
-}
-
-/// Mean and sample standard deviation.
-pub fn mean_std(xs: &[f64]) -> (f64, f64) {
-    let n = xs.len() as f64;
-    if xs.is_empty() {
-        return (f64::NAN, f64::NAN);
-    }
-    let m = xs.iter().sum::<f64>() / n;
-    let v = if xs.len() > 1 { xs.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0) } else { 0.0 };
-    (m, v.sqrt())
-}
-
-/// Which plan a deployed planner hands the controller.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum PlanChoice {
-    /// The Gaussian policy's mean path: the deployed plan (default). Sampling noise
-    /// (std ≥ 0.1 m per waypoint) exists for exploration while training; measured on
-    /// Point Seq, 62 % of sampled paths satisfied the spec and 100 % of mean paths.
-    #[default]
-    Mean,
-    /// A path sampled from the policy, as during training.
-    Sampled,
-}
-
-/// Evaluates a planner and controller on `task`: `groups × per_group` runs from
-/// random starts, each executing the plan `choice` picks with the controller's mean
-/// actions.
-pub fn evaluate_task(
-    task: &Task,
-    planner: &PathPlanner,
-    controller: &Controller,
-    (groups, per_group): (usize, usize),
-    choice: PlanChoice,
-    seed: u64,
-) -> Result<TaskEval, crate::control::ControlError> {
-    let cerr = |e: candle_core::Error| crate::control::ControlError::Config(format!("planner: {e}"));
-    let spec = task.execution_spec();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut eval = TaskEval {
-        satisfaction: vec![],
-        steps_to_reach: vec![],
-        collisions: 0,
-        falls: 0,
-        timeouts: 0,
-        examples: vec![],
-    };
-    let mut cache = PolicyCache::default();
-    for _ in 0..groups {
-        let g0 = task.sample_starts(&mut rng, per_group).map_err(cerr)?;
-        let noise = task.sample_noise(&mut rng, per_group).map_err(cerr)?;
-        let planned = match choice {
-            PlanChoice::Mean => planner.mean_path(&g0, task.steps),
-            PlanChoice::Sampled => planner.sample(&g0, &noise).map(|b| b.paths),
-        };
-        let paths = paths_of(&planned.map_err(cerr)?).map_err(cerr)?;
-        let (mut sat, mut steps) = (0usize, 0.0f64);
-        for path in &paths {
-            let mut env = sim::make_env(controller.robot, task.map.clone())?;
-            let od = env.observation_space().dim();
-            let mut obs = vec![0.0; od];
-            let mut d = start_run(env.as_mut(), rng.random(), path, task.step_limit, &mut obs)?;
-            let mut trajectory = vec![path[0].clone()];
-            let mut action = vec![0.0; env.action_space().dim()];
-            let mut ret = 0.0;
-            while d.outcome().is_none() {
-                controller.act(&obs, 1, &mut cache, &mut action);
-                let s = env.step_into(&action, &mut obs)?;
-                ret += s.reward;
-                trajectory.push(env.position().to_vec());
-                if let Dispatch::NewGoal(g) = d.after_step(&s, env.position()) {
-                    env.set_goal(&g)?;
-                    env.observe(&mut obs);
-                }
-            }
-            let run = d.into_execution(&spec, task.steps, path.clone(), trajectory, ret);
-            match run.outcome {
-                Outcome::Collided => eval.collisions += 1,
-                Outcome::Fell => eval.falls += 1,
-                Outcome::TimedOut => eval.timeouts += 1,
-                Outcome::Completed => {}
-            }
-            if run.satisfied() {
-                sat += 1;
-                steps += reach_steps(&run, task);
-            }
-            if eval.examples.len() < 6 {
-                eval.examples.push(run);
-            }
-        }
-        eval.satisfaction.push(sat as f64 / per_group as f64);
-        if sat > 0 {
-            eval.steps_to_reach.push(steps / sat as f64);
-        }
-    }
-    Ok(eval)
 }

@@ -2,7 +2,11 @@
 //!
 //! * [`execute`] — the waypoint dispatcher (a small pure state machine) and the
 //!   satisfaction of an executed run.
-//! * [`joint`] — joint training of planner and controller, and task evaluation.
+//! * [`episode`] — the one episode loop, driving robots through their waypoints.
+//! * [`joint`] — joint training of planner and controller.
+//! * [`evaluate`] — tasks and controllers measured on fresh runs.
 
+pub mod episode;
+pub mod evaluate;
 pub mod execute;
 pub mod joint;

@@ -1,0 +1,250 @@
+//! Evaluation: what trained planners and controllers achieve, on fresh runs driven by
+//! the controller's mean actions through the one episode loop ([`super::episode`]).
+//!
+//! * [`evaluate_task`] — a task: groups of runs, each executing a plan from a random
+//!   start; satisfaction and steps to reach per group (the paper's protocol).
+//! * [`evaluate_controller`] — a controller alone: episodes to random goals.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use sim::{Map, VecEnv};
+
+use super::episode::{Episode, MeanActions, drive};
+use super::execute::{Execution, Outcome, WaypointDispatcher, start_run};
+use super::joint::paths_of;
+use crate::control::{ControlError, Controller};
+use crate::plan::planner::PathPlanner;
+use crate::task::Task;
+
+/// The evaluation protocol's defaults (paper §4.4: 5 groups of 100 runs); the seed of
+/// starts and plans is this project's fixed choice, so evaluations compare.
+pub const EVAL_GROUPS: usize = 5;
+/// Runs per evaluation group.
+pub const EVAL_PER_GROUP: usize = 100;
+/// Seed of evaluation starts and plans.
+pub const EVAL_SEED: u64 = 2024;
+
+/// Steps to reach of a satisfying run under `task`'s count.
+pub(crate) fn reach_steps(run: &Execution, task: &Task) -> f64 {
+    run.steps_to_reach(task.steps_to_reach_at).unwrap_or(run.steps) as f64
+}
+
+/// Satisfaction and steps to reach over groups of runs (the paper's protocol: 5
+/// groups of 100), mean ± sample std over the groups.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TaskEval {
+    /// Satisfaction of each group.
+    pub satisfaction: Vec<f64>,
+    /// Mean steps to reach of each group (over its satisfying runs).
+    pub steps_to_reach: Vec<f64>,
+    /// Runs ended by a collision, over all groups.
+    pub collisions: usize,
+    /// Runs ended by a fall (legged robots), over all groups.
+    #[serde(default)]
+    pub falls: usize,
+    /// Runs that timed out.
+    pub timeouts: usize,
+    /// A few runs, for pictures.
+    pub examples: Vec<Execution>,
+}
+
+/// Mean and sample standard deviation.
+pub fn mean_std(xs: &[f64]) -> (f64, f64) {
+    let n = xs.len() as f64;
+    if xs.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let m = xs.iter().sum::<f64>() / n;
+    let v = if xs.len() > 1 { xs.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0) } else { 0.0 };
+    (m, v.sqrt())
+}
+
+/// Which plan a deployed planner hands the controller.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PlanChoice {
+    /// The Gaussian policy's mean path: the deployed plan (default). Sampling noise
+    /// (std ≥ 0.1 m per waypoint) exists for exploration while training; measured on
+    /// Point Seq, 62 % of sampled paths satisfied the spec and 100 % of mean paths.
+    #[default]
+    Mean,
+    /// A path sampled from the policy, as during training.
+    Sampled,
+}
+
+/// Evaluates a planner and controller on `task`: `groups × per_group` runs from
+/// random starts, each executing the plan `choice` picks with the controller's mean
+/// actions.
+pub fn evaluate_task(
+    task: &Task,
+    planner: &PathPlanner,
+    controller: &Controller,
+    (groups, per_group): (usize, usize),
+    choice: PlanChoice,
+    seed: u64,
+) -> Result<TaskEval, crate::control::ControlError> {
+    let cerr = |e: candle_core::Error| ControlError::Config(format!("planner: {e}"));
+    let spec = task.execution_spec();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut eval = TaskEval {
+        satisfaction: vec![],
+        steps_to_reach: vec![],
+        collisions: 0,
+        falls: 0,
+        timeouts: 0,
+        examples: vec![],
+    };
+    for _ in 0..groups {
+        let g0 = task.sample_starts(&mut rng, per_group).map_err(cerr)?;
+        let noise = task.sample_noise(&mut rng, per_group).map_err(cerr)?;
+        let planned = match choice {
+            PlanChoice::Mean => planner.mean_path(&g0, task.steps),
+            PlanChoice::Sampled => planner.sample(&g0, &noise).map(|b| b.paths),
+        };
+        let paths = paths_of(&planned.map_err(cerr)?).map_err(cerr)?;
+        let mut envs = (0..paths.len())
+            .map(|_| sim::make_env(controller.robot, task.map.clone()))
+            .collect::<Result<Vec<_>, _>>()?;
+        let od = envs.first().map_or(0, |e| e.observation_space().dim());
+        let mut raw = vec![0.0; paths.len() * od];
+        let mut dispatchers = Vec::with_capacity(paths.len());
+        for (i, (env, path)) in envs.iter_mut().zip(&paths).enumerate() {
+            let obs = &mut raw[i * od..(i + 1) * od];
+            dispatchers.push(start_run(env.as_mut(), rng.random(), path, task.step_limit, obs)?);
+        }
+        let episodes = drive(&mut envs, dispatchers, &mut raw, &mut MeanActions::new(controller))?;
+        let (mut sat, mut steps) = (0usize, 0.0f64);
+        for (e, path) in episodes.into_iter().zip(&paths) {
+            let run =
+                e.dispatcher.into_execution(&spec, task.steps, path.clone(), e.trajectory, e.control_return);
+            match run.outcome {
+                Outcome::Collided => eval.collisions += 1,
+                Outcome::Fell => eval.falls += 1,
+                Outcome::TimedOut => eval.timeouts += 1,
+                Outcome::Completed => {}
+            }
+            if run.satisfied() {
+                sat += 1;
+                steps += reach_steps(&run, task);
+            }
+            if eval.examples.len() < 6 {
+                eval.examples.push(run);
+            }
+        }
+        eval.satisfaction.push(sat as f64 / per_group as f64);
+        if sat > 0 {
+            eval.steps_to_reach.push(steps / sat as f64);
+        }
+    }
+    Ok(eval)
+}
+
+/// What [`evaluate_controller`] measured.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ControllerEval {
+    /// Episodes run.
+    pub episodes: usize,
+    /// Fraction of episodes whose goal was reached (within the step limit, without
+    /// collision).
+    pub success_rate: f64,
+    /// Mean environment steps to reach the goal, over the successful episodes.
+    pub mean_steps_to_reach: Option<f64>,
+    /// Episodes ended by a collision or a fall.
+    pub collisions: usize,
+    /// Episodes that ran out of steps.
+    pub timeouts: usize,
+}
+
+/// One episode to a random goal, with what a picture of it needs.
+pub struct GoalEpisode {
+    /// The run.
+    pub episode: Episode,
+    /// Its goal.
+    pub goal: Vec<f64>,
+    /// The robot's heading at the end (rad).
+    pub heading: f64,
+    /// The robot's radius (m).
+    pub radius: f64,
+    /// How close counts as reaching the goal (m).
+    pub reach_radius: f64,
+}
+
+/// `episodes` single-goal episodes on `map` (random free start and goal from `seed`,
+/// mean actions, at most `max_steps` steps each), 64 environments at a time.
+pub fn goal_episodes(
+    controller: &Controller,
+    map: &Map,
+    episodes: usize,
+    seed: u64,
+    max_steps: usize,
+) -> Result<Vec<GoalEpisode>, ControlError> {
+    const BATCH: usize = 64;
+    let mut out = Vec::with_capacity(episodes);
+    let mut driver = MeanActions::new(controller);
+    while out.len() < episodes {
+        let n = BATCH.min(episodes - out.len());
+        let mut envs =
+            VecEnv::new(controller.robot, map.clone(), n, sim::vec_env::member_seed(seed, out.len()))?;
+        let od = envs.obs_dim();
+        let mut raw = vec![0.0; n * od];
+        let mut goals = Vec::with_capacity(n);
+        let mut dispatchers = Vec::with_capacity(n);
+        for (e, o) in envs.envs_mut().iter_mut().zip(raw.chunks_mut(od)) {
+            e.set_max_steps(max_steps);
+            e.observe(o);
+            goals.push(e.goal().to_vec());
+            dispatchers.push(WaypointDispatcher::new(
+                e.position().to_vec(),
+                vec![e.goal().to_vec()],
+                max_steps,
+            ));
+        }
+        let runs = drive(envs.envs_mut(), dispatchers, &mut raw, &mut driver)?;
+        for ((episode, goal), env) in runs.into_iter().zip(goals).zip(envs.envs()) {
+            out.push(GoalEpisode {
+                episode,
+                goal,
+                heading: env.heading(),
+                radius: env.radius(),
+                reach_radius: env.reach_radius(),
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// Runs [`goal_episodes`] and reports how many reach their goal.
+pub fn evaluate_controller(
+    controller: &Controller,
+    map: &Map,
+    episodes: usize,
+    seed: u64,
+    max_steps: usize,
+) -> Result<ControllerEval, ControlError> {
+    Ok(ControllerEval::of(&goal_episodes(controller, map, episodes, seed, max_steps)?))
+}
+
+impl ControllerEval {
+    /// What `runs` achieved.
+    pub fn of(runs: &[GoalEpisode]) -> Self {
+        let episodes = runs.len();
+        let (mut successes, mut steps, mut collisions, mut timeouts) = (0usize, 0usize, 0usize, 0usize);
+        for r in runs {
+            match r.episode.dispatcher.outcome() {
+                Some(Outcome::Completed) => {
+                    successes += 1;
+                    steps += r.episode.dispatcher.steps();
+                }
+                Some(Outcome::Collided | Outcome::Fell) => collisions += 1,
+                Some(Outcome::TimedOut) | None => timeouts += 1,
+            }
+        }
+        ControllerEval {
+            episodes,
+            success_rate: successes as f64 / episodes.max(1) as f64,
+            mean_steps_to_reach: (successes > 0).then(|| steps as f64 / successes as f64),
+            collisions,
+            timeouts,
+        }
+    }
+}
