@@ -201,7 +201,7 @@ fn joint_train_resume_and_eval_end_to_end() {
         dir.join("y").to_str().unwrap(),
     ]);
     assert!(
-        !o.status.success() && stderr(&o).contains("safe_margin must be a non-negative"),
+        !o.status.success() && stderr(&o).contains("--safe-margin must be a non-negative"),
         "{}",
         stderr(&o)
     );

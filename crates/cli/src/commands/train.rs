@@ -216,6 +216,14 @@ fn check_settings(s: &JointRunSettings) -> Result<()> {
     if s.save_every == 0 {
         bail!("--save-every must be at least 1");
     }
+    if s.joint.plan_batch == 0 {
+        bail!("--plan-batch must be at least 1");
+    }
+    for (flag, metres) in [("--goal-margin", s.joint.goal_margin), ("--safe-margin", s.joint.safe_margin)] {
+        if !(metres >= 0.0 && metres.is_finite()) {
+            bail!("{flag} must be a non-negative number of metres, got {metres}");
+        }
+    }
     s.pretrain
         .validate()
         .map_err(|e| anyhow::anyhow!("--{}", e.replace("pretrain.", "pretrain-").replace('_', "-")))?;

@@ -10,10 +10,11 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use sim::{Map, VecEnv};
 
+use super::RunError;
 use super::episode::{Episode, MeanActions, drive};
 use super::execute::{Execution, Outcome, WaypointDispatcher, start_run};
 use super::joint::paths_of;
-use crate::control::{ControlError, Controller};
+use crate::control::Controller;
 use crate::plan::planner::PathPlanner;
 use crate::task::Task;
 
@@ -82,8 +83,7 @@ pub fn evaluate_task(
     (groups, per_group): (usize, usize),
     choice: PlanChoice,
     seed: u64,
-) -> Result<TaskEval, crate::control::ControlError> {
-    let cerr = |e: candle_core::Error| ControlError::Config(format!("planner: {e}"));
+) -> Result<TaskEval, RunError> {
     let spec = task.execution_spec();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut eval = TaskEval {
@@ -95,13 +95,13 @@ pub fn evaluate_task(
         examples: vec![],
     };
     for _ in 0..groups {
-        let g0 = task.sample_starts(&mut rng, per_group).map_err(cerr)?;
-        let noise = task.sample_noise(&mut rng, per_group).map_err(cerr)?;
+        let g0 = task.sample_starts(&mut rng, per_group)?;
+        let noise = task.sample_noise(&mut rng, per_group)?;
         let planned = match choice {
             PlanChoice::Mean => planner.mean_path(&g0, task.steps),
             PlanChoice::Sampled => planner.sample(&g0, &noise).map(|b| b.paths),
         };
-        let paths = paths_of(&planned.map_err(cerr)?).map_err(cerr)?;
+        let paths = paths_of(&planned?)?;
         let mut envs = (0..paths.len())
             .map(|_| sim::make_env(controller.robot, task.map.clone()))
             .collect::<Result<Vec<_>, _>>()?;
@@ -177,7 +177,7 @@ pub fn goal_episodes(
     episodes: usize,
     seed: u64,
     max_steps: usize,
-) -> Result<Vec<GoalEpisode>, ControlError> {
+) -> Result<Vec<GoalEpisode>, RunError> {
     const BATCH: usize = 64;
     let mut out = Vec::with_capacity(episodes);
     let mut driver = MeanActions::new(controller);
@@ -220,7 +220,7 @@ pub fn evaluate_controller(
     episodes: usize,
     seed: u64,
     max_steps: usize,
-) -> Result<ControllerEval, ControlError> {
+) -> Result<ControllerEval, RunError> {
     Ok(ControllerEval::of(&goal_episodes(controller, map, episodes, seed, max_steps)?))
 }
 

@@ -23,6 +23,7 @@ use crate::control::policy::PolicyCache;
 use crate::control::ppo::{RolloutBuffer, UpdateStats as PpoStats};
 use crate::control::trainer::normalize_obs;
 use crate::plan::cpg::{CpgConfig, PlanTrainer};
+use crate::run::RunError;
 use crate::run::episode::{Driver, drive};
 use crate::run::evaluate::reach_steps;
 use crate::run::execute::{Execution, Outcome, start_run};
@@ -242,27 +243,30 @@ impl JointTrainer {
         config: JointConfig,
         cpg: CpgConfig,
         control: ControlTrainer,
-    ) -> Result<Self, crate::control::ControlError> {
+    ) -> Result<Self, RunError> {
         let robot: Robot = task.robot.parse()?;
         if robot != control.robot {
-            return Err(crate::control::ControlError::Config(format!(
-                "the task is for the {} but the controller drives the {}",
-                task.robot, control.robot
-            )));
+            return Err(RunError::Setting {
+                key: "robot",
+                message: format!(
+                    "the task is for the {} but the controller drives the {}",
+                    task.robot, control.robot
+                ),
+            });
         }
         if config.plan_batch == 0 {
-            return Err(crate::control::ControlError::Config("plan_batch must be at least 1".into()));
+            return Err(RunError::Setting { key: "plan_batch", message: "must be at least 1".into() });
         }
         for (key, metres) in [("goal_margin", config.goal_margin), ("safe_margin", config.safe_margin)] {
             if !(metres >= 0.0 && metres.is_finite()) {
-                return Err(crate::control::ControlError::Config(format!(
-                    "{key} must be a non-negative number of metres, got {metres}"
-                )));
+                return Err(RunError::Setting {
+                    key,
+                    message: format!("must be a non-negative number of metres, got {metres}"),
+                });
             }
         }
         let planned = task.with_goal_margin(config.goal_margin).with_safe_margin(config.safe_margin);
-        let plan = PlanTrainer::new(planned, cpg)
-            .map_err(|e| crate::control::ControlError::Config(format!("planner: {e}")))?;
+        let plan = PlanTrainer::new(planned, cpg)?;
         let envs = (0..config.plan_batch)
             .map(|_| sim::make_env(robot, task.map.clone()))
             .collect::<Result<Vec<_>, _>>()?;
@@ -284,12 +288,11 @@ impl JointTrainer {
     }
 
     /// One iteration: plan, execute, update.
-    pub fn iterate(&mut self) -> Result<JointMetrics, crate::control::ControlError> {
+    pub fn iterate(&mut self) -> Result<JointMetrics, RunError> {
         let start = Instant::now();
-        let cerr = |e: candle_core::Error| crate::control::ControlError::Config(format!("planner: {e}"));
-        let batch = self.plan.sample(self.config.plan_batch).map_err(cerr)?;
-        let paths = paths_of(&batch.paths).map_err(cerr)?;
-        let hard = self.plan.hard_robustness(&batch.paths).map_err(cerr)?;
+        let batch = self.plan.sample(self.config.plan_batch)?;
+        let paths = paths_of(&batch.paths)?;
+        let hard = self.plan.hard_robustness(&batch.paths)?;
         let learn = !self.config.freeze_controller;
         let runs = self.execute(&paths, learn)?;
         let steps: usize = runs.iter().map(|r| r.steps).sum();
@@ -297,7 +300,7 @@ impl JointTrainer {
         let rl: Vec<f64> = runs.iter().map(|r| self.config.control_weight * r.control_return).collect();
         let mut plan_loss = None;
         if !self.config.freeze_planner {
-            plan_loss = Some(self.plan.update_on(&batch, &rl).map_err(cerr)?.loss);
+            plan_loss = Some(self.plan.update_on(&batch, &rl)?.loss);
         }
         let mut control = None;
         let ppo = &self.control.config.ppo;
@@ -333,11 +336,7 @@ impl JointTrainer {
 
     /// Executes `paths` in lockstep, one environment each; with `learn`, samples
     /// actions and records the transitions for PPO, otherwise uses mean actions.
-    fn execute(
-        &mut self,
-        paths: &[Vec<Vec<f64>>],
-        learn: bool,
-    ) -> Result<Vec<Execution>, crate::control::ControlError> {
+    fn execute(&mut self, paths: &[Vec<Vec<f64>>], learn: bool) -> Result<Vec<Execution>, RunError> {
         // Judged on the task's own goals, not the planner's shrunk ones.
         let spec = self.task.execution_spec();
         let od = self.control.policy.obs_dim();

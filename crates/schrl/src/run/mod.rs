@@ -10,3 +10,25 @@ pub mod episode;
 pub mod evaluate;
 pub mod execute;
 pub mod joint;
+
+/// A problem running plans with a controller, naming its source.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// A joint-training setting is invalid (the setting's key, what is wrong).
+    #[error("invalid setting {key}: {message}")]
+    Setting {
+        /// The setting's key, as in the run's settings.
+        key: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// The planner failed (its tensors or its spec).
+    #[error("planner: {0}")]
+    Planner(#[from] candle_core::Error),
+    /// The controller refused its configuration.
+    #[error(transparent)]
+    Control(#[from] crate::control::ControlError),
+    /// An environment refused something.
+    #[error(transparent)]
+    Env(#[from] sim::EnvError),
+}
