@@ -128,7 +128,7 @@ impl TrainArgs {
         super::refuse_conflicts(
             RunKind::Controller,
             &[
-                ("--robot", self.robot.is_some_and(|r| r.name() != saved.robot)),
+                ("--robot", differs(&self.robot, &saved.robot)),
                 ("--map", differs(&map, &saved.map)),
                 ("--seed", differs(&self.seed, &saved.seed)),
                 ("--preset", preset_differs),
@@ -200,7 +200,7 @@ fn train(args: TrainArgs) -> Result<()> {
     save_curve(&history, &curve)?;
     println!(
         "trained the {} for {} environment steps in {wall:.1} s ({:.0} steps/s); run in {}",
-        trainer.robot,
+        trainer.config.robot,
         trainer.steps,
         (trainer.steps - first_step) as f64 / wall.max(1e-9),
         out.display()

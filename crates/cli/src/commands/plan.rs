@@ -58,7 +58,7 @@ pub struct TimeArgs {
 pub struct TrainArgs {
     /// Robot (planner tasks exist for point).
     #[arg(long, default_value = "point")]
-    robot: String,
+    robot: sim::Robot,
     /// Task: seq, cover, branch, loop or signal. Required for a new run.
     #[arg(long)]
     task: Option<TaskKind>,
@@ -206,8 +206,8 @@ pub fn run(cmd: Command) -> Result<()> {
 }
 
 fn train(args: TrainArgs) -> Result<()> {
-    if args.robot != "point" {
-        bail!("planner tasks exist for the point robot only so far, not '{}'", args.robot);
+    if args.robot != sim::Robot::Point {
+        bail!("planner tasks exist for the point robot only so far, not the {}", args.robot);
     }
     let out = args.run.out.clone();
     let (mut run, settings, resumed) = if args.run.resume {

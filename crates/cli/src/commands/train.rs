@@ -264,7 +264,7 @@ fn load_task(robot: Robot, task: &str) -> Result<Task> {
         let kind: TaskKind = task.parse().map_err(anyhow::Error::msg)?;
         Task::builtin(robot.name(), kind)?
     };
-    if t.robot != robot.name() {
+    if t.robot != robot {
         bail!("task '{}' is for the {}, not the {robot}", t.name, t.robot);
     }
     Ok(t)
@@ -396,8 +396,13 @@ fn start_run(settings: &JointRunSettings, run: &mut RunWriter) -> Result<JointTr
     let control = match &settings.controller {
         Some(dir) => {
             let c = store::controller::load(dir).map_err(super::store_error)?;
-            if c.robot != settings.robot {
-                bail!("--controller {}: a {} controller, not {}", dir.display(), c.robot, settings.robot);
+            if c.config.robot != settings.robot {
+                bail!(
+                    "--controller {}: a {} controller, not {}",
+                    dir.display(),
+                    c.config.robot,
+                    settings.robot
+                );
             }
             c
         }

@@ -23,8 +23,8 @@ use super::ppo::{PpoConfig, PpoLearner, RolloutBuffer, UpdateStats};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ControlConfig {
-    /// Robot name (`point`, `car`, `drone`).
-    pub robot: String,
+    /// The robot.
+    pub robot: Robot,
     /// Map name; goals and starts are drawn from its free space.
     pub map: String,
     /// Seed of initial weights, environments and action noise.
@@ -42,7 +42,7 @@ impl ControlConfig {
     /// budget that reaches ≥ 95 % success (measured; see the README's results).
     pub fn for_robot(robot: Robot) -> Self {
         Self {
-            robot: robot.name().to_string(),
+            robot,
             map: open_map(robot).name().to_string(),
             seed: 0,
             total_steps: default_steps(robot),
@@ -119,10 +119,8 @@ pub struct ControlMetrics {
 /// Everything a controller training run holds; [`crate::store::controller`] saves and
 /// restores all of it, so a resumed run continues exactly.
 pub struct ControlTrainer {
-    /// The configuration.
+    /// The configuration (the robot included).
     pub config: ControlConfig,
-    /// The robot.
-    pub robot: Robot,
     /// Actor and critic.
     pub policy: ActorCritic,
     /// PPO's optimiser side.
@@ -153,7 +151,7 @@ impl ControlTrainer {
     /// A fresh run.
     pub fn new(config: ControlConfig) -> Result<Self, ControlError> {
         config.ppo.validate().map_err(ControlError::Config)?;
-        let robot: Robot = config.robot.parse()?;
+        let robot = config.robot;
         let map = Map::by_name(&config.map).ok_or_else(|| sim::EnvError::UnknownMap(config.map.clone()))?;
         if config.episode_steps == 0 {
             return Err(ControlError::Config("episode_steps must be at least 1".into()));
@@ -173,7 +171,6 @@ impl ControlTrainer {
         }
         let n = config.ppo.num_envs;
         Ok(Self {
-            robot,
             policy,
             learner,
             obs_rms: RunningMeanStd::new(od),
@@ -207,12 +204,10 @@ impl ControlTrainer {
         steps: usize,
         updates: usize,
     ) -> Result<Self, ControlError> {
-        let robot: Robot = config.robot.parse()?;
         let n = config.ppo.num_envs;
         let buffer = RolloutBuffer::new(n, policy.obs_dim(), policy.act_dim());
         Ok(Self {
             config,
-            robot,
             policy,
             learner,
             obs_rms,
@@ -242,7 +237,7 @@ impl ControlTrainer {
     /// The deployable part: policy and observation statistics.
     pub fn controller(&self) -> Controller {
         Controller {
-            robot: self.robot,
+            robot: self.config.robot,
             policy: self.policy.clone(),
             obs_rms: self.obs_rms.clone(),
             normalize_obs: self.config.ppo.norm_obs,

@@ -244,13 +244,13 @@ impl JointTrainer {
         cpg: CpgConfig,
         control: ControlTrainer,
     ) -> Result<Self, RunError> {
-        let robot: Robot = task.robot.parse()?;
-        if robot != control.robot {
+        let robot = task.robot;
+        if robot != control.config.robot {
             return Err(RunError::Setting {
                 key: "robot",
                 message: format!(
                     "the task is for the {} but the controller drives the {}",
-                    task.robot, control.robot
+                    task.robot, control.config.robot
                 ),
             });
         }

@@ -75,7 +75,7 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<ControlTrainer, StoreError> {
     let state_path = ckpt.path_of(STATE);
     let bad = |message: String| invalid(&state_path, message);
     state.config.ppo.validate().map_err(&bad)?;
-    let robot: sim::Robot = state.config.robot.parse().map_err(|e: sim::EnvError| bad(e.to_string()))?;
+    let robot = state.config.robot;
     let map =
         Map::by_name(&state.config.map).ok_or_else(|| bad(format!("unknown map '{}'", state.config.map)))?;
 

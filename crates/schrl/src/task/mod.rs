@@ -25,7 +25,7 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
-use sim::Map;
+use sim::{Map, Robot};
 use stl::tensor::TensorSpec;
 use stl::{AfterStep, Ball, Formula, Predicate, Spec};
 
@@ -126,8 +126,8 @@ impl std::str::FromStr for SafeAlong {
 pub struct Task {
     /// Task name (`seq`, ... or a user's).
     pub name: String,
-    /// Robot name.
-    pub robot: String,
+    /// The robot.
+    pub robot: Robot,
     /// The spec in the STL text syntax, obstacle clause included.
     pub spec: String,
     /// The parsed spec.
@@ -262,13 +262,17 @@ impl Task {
     ) -> Result<Task, TaskError> {
         let bad = |message: String| TaskError { path: toml_path.to_path_buf(), message };
         let t: TaskToml = toml::from_str(toml_text).map_err(|e| bad(toml_message(&e, toml_text)))?;
-        let dim = TASK_ROBOTS.iter().find(|(r, _)| *r == t.robot).map(|(_, d)| *d).ok_or_else(|| {
-            bad(format!(
-                "robot: unknown robot '{}': expected one of {}",
-                t.robot,
-                TASK_ROBOTS.map(|r| r.0).join(", ")
-            ))
-        })?;
+        let (robot, dim) = TASK_ROBOTS
+            .iter()
+            .find(|(r, _)| *r == t.robot)
+            .and_then(|(r, d)| Some((r.parse::<Robot>().ok()?, *d)))
+            .ok_or_else(|| {
+                bad(format!(
+                    "robot: unknown robot '{}': expected one of {}",
+                    t.robot,
+                    TASK_ROBOTS.map(|r| r.0).join(", ")
+                ))
+            })?;
         let map = Map::by_name(&t.map).ok_or_else(|| {
             bad(format!("map: unknown map '{}': expected one of {}", t.map, sim::map::MAP_NAMES.join(", ")))
         })?;
@@ -356,7 +360,7 @@ impl Task {
         }
         Ok(Task {
             name: t.name,
-            robot: t.robot,
+            robot,
             spec: spec_text.to_string(),
             formula,
             goals: t.goal,
