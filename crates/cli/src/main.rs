@@ -32,7 +32,7 @@ enum Command {
     /// Neural signed-distance predicates: fit, check.
     #[command(subcommand)]
     Sdf(commands::sdf::Command),
-    /// Train planner and controller together on a task (Algorithm 1), then evaluate.
+    /// Train planner and controller together on a task, then evaluate.
     Train(commands::train::TrainArgs),
     /// Evaluate a trained task: satisfaction and steps to reach over 5 groups of 100 runs.
     Eval(commands::train::EvalArgs),
