@@ -1,6 +1,7 @@
 //! Neural signed-distance predicates: the fit, saving and loading, and gradients
 //! through robustness.
 
+use schrl::store;
 use schrl::task::neural_sdf::{NeuralSdf, SdfFitConfig};
 use sim::Map;
 use stl::{Predicate, Semantics, Spec};
@@ -73,17 +74,17 @@ fn saves_loads_and_refuses_bad_files() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("duck.json");
     let _ = std::fs::remove_file(&path);
-    net.save(&path, false).unwrap();
-    assert_eq!(NeuralSdf::load(&path).unwrap(), net);
-    assert!(net.save(&path, false).unwrap_err().to_string().contains("already exists"));
-    net.save(&path, true).unwrap();
+    store::sdf::save(&net, &path, false).unwrap();
+    assert_eq!(store::sdf::load(&path).unwrap(), net);
+    assert!(store::sdf::save(&net, &path, false).unwrap_err().to_string().contains("already exists"));
+    store::sdf::save(&net, &path, true).unwrap();
     // A truncated parameter list is named as such, with the file.
     let mut bad = net.clone();
     bad.params.pop();
     std::fs::write(&path, serde_json::to_string(&bad).unwrap()).unwrap();
-    let err = NeuralSdf::load(&path).unwrap_err().to_string();
+    let err = store::sdf::load(&path).unwrap_err().to_string();
     assert!(err.contains("duck.json") && err.contains("parameters"), "{err}");
-    assert!(NeuralSdf::load(&dir.join("missing.json")).unwrap_err().to_string().contains("missing.json"));
+    assert!(store::sdf::load(&dir.join("missing.json")).unwrap_err().to_string().contains("missing.json"));
     // The duck is 3-D and is checked against its own map only.
     assert!(net.evaluate(&Map::by_name("walls").unwrap(), 1, 10).is_err());
 }

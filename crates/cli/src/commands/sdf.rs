@@ -76,7 +76,7 @@ fn fit(args: FitArgs) -> Result<()> {
     let cfg = SdfFitConfig { steps: args.steps, seed: args.seed, ..SdfFitConfig::default() };
     let start = std::time::Instant::now();
     let (net, report) = NeuralSdf::fit(&map, &cfg).map_err(anyhow::Error::msg)?;
-    net.save(&args.out, args.force).map_err(super::store_error)?;
+    schrl::store::sdf::save(&net, &args.out, args.force).map_err(super::store_error)?;
     println!(
         "fitted the {} map's distance in {:.1} s ({} steps, final loss {:.5}); saved {}",
         map.name(),
@@ -95,7 +95,7 @@ fn fit(args: FitArgs) -> Result<()> {
 }
 
 fn check(args: CheckArgs) -> Result<()> {
-    let net = NeuralSdf::load(&args.sdf)?;
+    let net = schrl::store::sdf::load(&args.sdf)?;
     let map = map_named(&net.map)?;
     let report = net.evaluate(&map, 0xC4EC, 4000).map_err(anyhow::Error::msg)?;
     print_report(&report);

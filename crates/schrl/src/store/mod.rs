@@ -34,6 +34,7 @@ pub mod controller;
 pub mod joint;
 mod metrics;
 pub mod planner;
+pub mod sdf;
 
 use std::collections::BTreeMap;
 use std::fs::{self, File};

@@ -13,7 +13,6 @@
 //! batch 256), half the
 //! training points uniform in the map's region and half within 0.5 m of a surface.
 
-use std::path::Path;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -23,7 +22,6 @@ use stl::Predicate;
 
 use crate::nn::adam::Adam;
 use crate::nn::mlp::{MlpCache, TanhMlp};
-use crate::store::{StoreError, write_atomic};
 
 /// How a neural SDF is fitted.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -226,36 +224,23 @@ impl NeuralSdf {
         self.distance_and_grad(p, &mut g)
     }
 
-    /// Saves the network as JSON, atomically; refuses to replace a file unless `force`.
-    pub fn save(&self, path: &Path, force: bool) -> Result<(), StoreError> {
-        if path.exists() && !force {
-            return Err(StoreError::FileExists(path.to_path_buf()));
+    /// Checks that the network's shape is consistent (a file may say anything).
+    pub fn check(&self) -> Result<(), String> {
+        if self.sizes.len() < 2 || self.sizes.last() != Some(&1) {
+            return Err(format!("layer sizes {:?} do not end in one output", self.sizes));
         }
-        let json = serde_json::to_string(self).expect("weights are plain numbers");
-        write_atomic(path, json.as_bytes())
-    }
-
-    /// Loads a network saved by [`NeuralSdf::save`], checking its shape.
-    pub fn load(path: &Path) -> Result<Self, StoreError> {
-        let invalid = |message: String| StoreError::Invalid { path: path.to_path_buf(), message };
-        let text =
-            std::fs::read_to_string(path).map_err(|e| invalid(format!("cannot read the neural SDF: {e}")))?;
-        let net: Self = serde_json::from_str(&text).map_err(|e| invalid(e.to_string()))?;
-        if net.sizes.len() < 2 || net.sizes.last() != Some(&1) {
-            return Err(invalid(format!("layer sizes {:?} do not end in one output", net.sizes)));
+        let expected = TanhMlp::new(&self.sizes).num_params();
+        if self.params.len() != expected {
+            return Err(format!(
+                "{} parameters for layer sizes {:?} (expected {expected})",
+                self.params.len(),
+                self.sizes
+            ));
         }
-        if net.params.len() != TanhMlp::new(&net.sizes).num_params() {
-            return Err(invalid(format!(
-                "{} parameters for layer sizes {:?} (expected {})",
-                net.params.len(),
-                net.sizes,
-                TanhMlp::new(&net.sizes).num_params()
-            )));
+        if !(self.input_scale.is_finite() && self.input_scale > 0.0) {
+            return Err(format!("input_scale must be positive, got {}", self.input_scale));
         }
-        if !(net.input_scale.is_finite() && net.input_scale > 0.0) {
-            return Err(invalid(format!("input_scale must be positive, got {}", net.input_scale)));
-        }
-        Ok(net)
+        Ok(())
     }
 
     /// This network as an STL predicate: `sdf(p) − radius` (clearance for a robot of
