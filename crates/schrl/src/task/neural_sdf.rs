@@ -13,7 +13,6 @@
 //! batch 256), half the
 //! training points uniform in the map's region and half within 0.5 m of a surface.
 
-
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
