@@ -42,6 +42,9 @@ enum Command {
     /// Goal-conditioned PPO controllers: train, eval.
     #[command(subcommand)]
     Control(commands::control::Command),
+    /// Pictures of results: grouped bars (Fig. 4).
+    #[command(subcommand)]
+    Plot(commands::plot::Command),
 }
 
 fn main() -> ExitCode {
@@ -62,6 +65,7 @@ fn main() -> ExitCode {
         Command::Task(cmd) => commands::task::run(cmd),
         Command::Train(args) => commands::train::train(args),
         Command::Eval(args) => commands::train::eval(args),
+        Command::Plot(cmd) => commands::plot::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

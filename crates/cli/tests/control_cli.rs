@@ -119,7 +119,7 @@ fn joint_train_resume_and_eval_end_to_end() {
     assert!(o.status.success(), "{}", stderr(&o));
     let run = dir.join("run");
     let run_s = run.to_str().unwrap();
-    // Algorithm 1 in full: the planner updates in the joint phase too.
+    // Algorithm 1: the planner updates in the joint phase too (the default).
     let args = [
         "train",
         "--task",
@@ -130,7 +130,6 @@ fn joint_train_resume_and_eval_end_to_end() {
         "5",
         "--eval-groups",
         "1",
-        "--joint-planner",
         "--planner",
         "mlp",
     ];
@@ -170,6 +169,13 @@ fn joint_train_resume_and_eval_end_to_end() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(lines(&run.join("metrics.jsonl")) > before);
+    // The planner learns in the joint phase by default: a loss on every iteration.
+    let metrics = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
+    for line in metrics.lines() {
+        let m: serde_json::Value = serde_json::from_str(line).unwrap();
+        assert!(m["plan_loss"].is_f64(), "no planner update in {line}");
+        assert!(m["low_level_reward"].as_f64().is_some_and(|r| (-2.0..=0.0).contains(&r)), "{line}");
+    }
     let o = schrl(&["eval", "--ckpt", run_s, "--groups", "2", "--per-group", "10"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = stdout(&o);
@@ -178,6 +184,33 @@ fn joint_train_resume_and_eval_end_to_end() {
     assert!((0.0..=1.0).contains(&mean.parse::<f64>().unwrap()) && std.parse::<f64>().unwrap() >= 0.0);
     let o = schrl(&["eval", "--ckpt", run_s, "--groups", "1", "--per-group", "5", "--sampled-plans"]);
     assert!(o.status.success() && stdout(&o).contains("satisfaction: "), "{}", stderr(&o));
+    // Fig. 4's variants: the gradient planner's plans, another controller.
+    let o = schrl(&["eval", "--ckpt", run_s, "--groups", "1", "--per-group", "3", "--planner", "gradient"]);
+    assert!(o.status.success() && stdout(&o).contains("satisfaction: "), "{}", stderr(&o));
+    let o = schrl(&[
+        "eval",
+        "--ckpt",
+        run_s,
+        "--groups",
+        "1",
+        "--per-group",
+        "3",
+        "--controller",
+        ctl.to_str().unwrap(),
+    ]);
+    assert!(o.status.success() && stdout(&o).contains("satisfaction: "), "{}", stderr(&o));
+    let o = schrl(&["eval", "--ckpt", run_s, "--planner", "gradient", "--sampled-plans"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("does not go with --planner gradient"),
+        "{}",
+        stderr(&o)
+    );
+    // Fig. 5: the two planners' waypoints in one picture.
+    let fig5 = dir.join("fig5.svg");
+    let o = schrl(&["plan", "compare", "--ckpt", run_s, "--n", "2", "--out", fig5.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("start 1: network"), "{}", stdout(&o));
+    assert!(std::fs::read_to_string(&fig5).unwrap().contains("gradient planner"));
     let o = schrl(&[
         "train",
         "--robot",
@@ -205,5 +238,37 @@ fn joint_train_resume_and_eval_end_to_end() {
         "{}",
         stderr(&o)
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn plot_bars_draws_results_and_names_bad_rows() {
+    let dir = std::env::temp_dir().join(format!("schrl-bars-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("fig4.csv");
+    std::fs::write(
+        &csv,
+        "task,variant,seed,satisfaction,steps_to_reach\n\
+         seq,(a) SCHRL,0,1.0,480\nseq,(a) SCHRL,1,0.99,470\nseq,(c) gradient planner,0,0.02,-\n\
+         loop,(a) SCHRL,0,1.0,1600\n",
+    )
+    .unwrap();
+    let plot = |out: &str| schrl(&["plot", "bars", "--results", csv.to_str().unwrap(), "--out", out]);
+    let out = dir.join("fig4.svg");
+    let o = plot(out.to_str().unwrap());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let svg = std::fs::read_to_string(&out).unwrap();
+    assert!(svg.contains("(c) gradient planner") && svg.contains("steps to reach (normalised)"));
+    // An existing picture is kept without --force.
+    let o = plot(out.to_str().unwrap());
+    assert!(!o.status.success() && stderr(&o).contains("--force"), "{}", stderr(&o));
+    let other = dir.join("x.png");
+    std::fs::write(&csv, "task,variant,seed,satisfaction,steps_to_reach\nseq,a,0,high,-\n").unwrap();
+    let o = plot(other.to_str().unwrap());
+    assert!(stderr(&o).contains("row 2, column satisfaction: 'high' is not a number"), "{}", stderr(&o));
+    std::fs::write(&csv, "task,satisfaction\n").unwrap();
+    let o = plot(other.to_str().unwrap());
+    assert!(stderr(&o).contains("the header must be"), "{}", stderr(&o));
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -48,17 +48,22 @@ fn dispatcher_stops_when_the_robot_falls() {
     assert_eq!(d.outcome(), Some(Outcome::Fell));
 }
 
+/// A path from (1.5, −1.5) with two waypoints inside each of `task`'s goals, in order
+/// (it satisfies Seq).
+fn through_goals(task: &Task) -> Vec<Vec<f64>> {
+    let mut path = vec![vec![1.5, -1.5]];
+    for g in task.goals.iter().map(|g| &g.center) {
+        path.push(vec![g[0] + 0.1, g[1]]);
+        path.push(vec![g[0], g[1] - 0.1]);
+    }
+    path
+}
+
 #[test]
 fn satisfaction_is_judged_on_the_executed_path() {
     let task = Task::point(TaskKind::Seq);
     let spec = task.spec();
-    // Two waypoints per goal, in order, inside each goal's disc: satisfies.
-    let goals: Vec<Vec<f64>> = task.goals.iter().map(|g| g.center.clone()).collect();
-    let mut good = vec![vec![1.5, -1.5]];
-    for g in &goals {
-        good.push(vec![g[0] + 0.1, g[1]]);
-        good.push(vec![g[0], g[1] - 0.1]);
-    }
+    let good = through_goals(&task);
     assert!(executed_robustness(&spec, &good, task.steps) > 0.0);
     // The same goals in the wrong order: violated.
     let mut swapped = good.clone();
@@ -167,4 +172,58 @@ fn reached_positions_that_cut_a_wall_corner_do_not_fail_a_collision_free_run() {
     // (-0.55, 1.85) -> (-1.65, -0.7) clips the wall centred at (-1, 0).
     assert!(executed_robustness(&task.spec(), &executed, task.steps) < 0.0);
     assert!(executed_robustness(&task.execution_spec(), &executed, task.steps) > 0.0);
+}
+
+#[test]
+fn leave_one_out_cancels_what_runs_of_one_start_share() {
+    use schrl::run::joint::leave_one_out;
+    // Two starts, one 100 units harder: the baselines remove the offset.
+    let easy = [-0.50, -0.52, -0.47, -0.55];
+    let hard: Vec<f64> = easy.iter().map(|r| r - 100.0).collect();
+    let adv = leave_one_out(&[&easy[..], &hard[..]].concat(), 4);
+    for (a, b) in adv[..4].iter().zip(&adv[4..]) {
+        assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+    }
+    // Run 0 against the mean of the other three.
+    assert!((adv[0] - (-0.50 - (-0.52 - 0.47 - 0.55) / 3.0)).abs() < 1e-12);
+    // Faster runs get positive advantages, slower negative.
+    assert!(adv[2] > 0.0 && adv[3] < 0.0);
+    // Groups of one: the rest of the batch is the baseline.
+    let whole = leave_one_out(&[1.0, 2.0, 3.0], 1);
+    assert_eq!(whole, vec![1.0 - 2.5, 2.0 - 2.0, 3.0 - 1.5]);
+}
+
+#[test]
+fn execution_reward_ranks_faster_runs_higher_and_every_failure_below_every_success() {
+    use schrl::run::joint::execution_reward;
+    let task = Task::point(TaskKind::Seq);
+    let spec = task.spec();
+    let good = through_goals(&task);
+    let run = |outcome, steps: usize, reached: usize| Execution {
+        planned: good.clone(),
+        robustness: executed_robustness(&spec, &good[..=reached], task.steps),
+        executed: good[..=reached].to_vec(),
+        trajectory: vec![],
+        outcome,
+        steps,
+        reached_at: (1..=reached).map(|k| 10 * k).collect(),
+        control_return: 0.0,
+    };
+    let fast = execution_reward(&run(Outcome::Completed, 400, 8), &task);
+    let slow = execution_reward(&run(Outcome::Completed, task.step_limit, 8), &task);
+    let far = execution_reward(&run(Outcome::Collided, 300, 6), &task);
+    let early = execution_reward(&run(Outcome::Collided, 50, 1), &task);
+    assert!(fast > slow && slow > far && far > early, "{fast} {slow} {far} {early}");
+    assert!((fast + 400.0 / task.step_limit as f64).abs() < 1e-12);
+}
+
+#[test]
+fn runs_per_start_must_divide_the_plan_batch() {
+    let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
+    let cfg = JointConfig { plan_batch: 8, runs_per_start: 3, ..JointConfig::default() };
+    let err = JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("runs_per_start") && err.contains("got 3"), "{err}");
 }

@@ -66,3 +66,72 @@ fn refuses_to_replace_a_file_or_guess_a_format() {
         .collect();
     assert!(leftovers.is_empty(), "temporary files are cleaned up");
 }
+
+#[test]
+fn tick_labels_stay_short() {
+    use sim::render::tick_label;
+    for (v, want) in [
+        (0.0, "0"),
+        (2e7, "2e7"),
+        (2.5e6, "2.5e6"),
+        (20000.0, "2e4"),
+        (9999.0, "9999"),
+        (150.0, "150"),
+        (0.25, "0.25"),
+        (1.0, "1"),
+        (-0.5, "-0.5"),
+        (1e-4, "1e-4"),
+        (0.1 + 0.2, "0.3"),
+    ] {
+        assert_eq!(tick_label(v), want, "{v}");
+    }
+}
+
+#[test]
+fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
+    use sim::render::{BarChart, BarPanel, ChartPanel, Series, save_bars, save_chart};
+    let panel = |y: &str| ChartPanel {
+        series: vec![Series { label: "executed runs".into(), points: vec![(0.0, 0.2), (2e6, 0.9)] }],
+        y_range: Some((0.0, 1.0)),
+        y_label: y.into(),
+    };
+    let svg = tmp("curve.svg");
+    save_chart(&[panel("satisfaction")], "environment steps", &svg, false).unwrap();
+    let text = std::fs::read_to_string(&svg).unwrap();
+    for want in ["environment steps", "satisfaction", "executed runs", "2e6"] {
+        assert!(text.contains(want), "{want} missing from the chart's SVG");
+    }
+    // PNG text is drawn with the embedded font: the titles change the pixels.
+    let (a, b) = (tmp("a.png"), tmp("b.png"));
+    save_chart(&[panel("satisfaction")], "environment steps", &a, false).unwrap();
+    save_chart(&[panel("")], "", &b, false).unwrap();
+    assert_ne!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "PNG text was not drawn");
+
+    let bars = BarChart {
+        groups: vec!["seq".into(), "loop".into()],
+        series: vec!["(a) SCHRL".into(), "(d) frozen planner".into()],
+        panels: vec![BarPanel {
+            y_label: "satisfaction (normalised)".into(),
+            values: vec![vec![1.0, 0.9], vec![0.95, f64::NAN]],
+            errors: Some(vec![vec![0.01, 0.05], vec![0.02, 0.0]]),
+            y_range: Some((0.0, 1.15)),
+        }],
+    };
+    let svg = tmp("bars.svg");
+    save_bars(&bars, &svg, false).unwrap();
+    let text = std::fs::read_to_string(&svg).unwrap();
+    for want in ["seq", "loop", "(a) SCHRL", "(d) frozen planner", "satisfaction (normalised)"] {
+        assert!(text.contains(want), "{want} missing from the bars' SVG");
+    }
+    save_bars(&bars, &tmp("bars.png"), false).unwrap();
+
+    let svg = tmp("scene.svg");
+    save(&scene("walls"), &svg, false).unwrap();
+    let text = std::fs::read_to_string(&svg).unwrap();
+    for want in ["x (m)", "y (m)", "walls", "goals", "planned waypoints", "executed trajectory"] {
+        assert!(text.contains(want), "{want} missing from the scene's SVG");
+    }
+    let svg = tmp("duck.svg");
+    save(&scene("duck"), &svg, false).unwrap();
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("z (m)"), "the side view's axis");
+}

@@ -8,7 +8,7 @@ use schrl::control::trainer::EVAL_SEED;
 use schrl::control::{ControlConfig, ControlMetrics, ControlTrainer, PpoConfig};
 use schrl::run::evaluate::{ControllerEval, GoalEpisode, evaluate_controller, goal_episodes};
 use schrl::store::{self, MetricsLog, RunKind, RunWriter};
-use sim::render::{ChartPanel, Goal, PathKind, Polyline, RobotMarker, Scene};
+use sim::render::{ChartPanel, Goal, PathKind, Polyline, RobotMarker, Scene, Series};
 use sim::{Map, Robot};
 
 /// Subcommands of `schrl control`.
@@ -221,14 +221,23 @@ fn train(args: TrainArgs) -> Result<()> {
 
 /// Success rate (top, 0–1) and mean episode return (bottom) against steps.
 fn save_curve(history: &[ControlMetrics], out: &Path) -> Result<()> {
-    let series = |f: &dyn Fn(&ControlMetrics) -> Option<f64>| -> Vec<(f64, f64)> {
-        history.iter().filter_map(|m| f(m).map(|y| (m.steps as f64, y))).collect()
+    let series = |label: &str, f: &dyn Fn(&ControlMetrics) -> Option<f64>| Series {
+        label: label.into(),
+        points: history.iter().filter_map(|m| f(m).map(|y| (m.steps as f64, y))).collect(),
     };
     let panels = [
-        ChartPanel { series: vec![series(&|m| m.success_rate)], y_range: Some((0.0, 1.0)) },
-        ChartPanel { series: vec![series(&|m| m.mean_return)], y_range: None },
+        ChartPanel {
+            series: vec![series("goals reached (last 100 episodes)", &|m| m.success_rate)],
+            y_range: Some((0.0, 1.0)),
+            y_label: "success rate".into(),
+        },
+        ChartPanel {
+            series: vec![series("mean episode return", &|m| m.mean_return)],
+            y_range: None,
+            y_label: "return".into(),
+        },
     ];
-    sim::render::save_chart(&panels, out, true)?;
+    sim::render::save_chart(&panels, "environment steps", out, true)?;
     Ok(())
 }
 

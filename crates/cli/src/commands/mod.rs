@@ -2,6 +2,7 @@
 
 pub mod control;
 pub mod plan;
+pub mod plot;
 pub mod robustness;
 pub mod sdf;
 pub mod sim;

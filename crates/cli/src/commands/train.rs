@@ -7,16 +7,17 @@ use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use schrl::control::{ControlConfig, ControlTrainer};
 use schrl::plan::cpg::{CpgConfig, Method};
+use schrl::plan::gradient_planner::GradientPlannerConfig;
 use schrl::plan::planner::PlannerKind;
 use schrl::plan::pretrain::{PretrainConfig, pretrain};
 use schrl::run::evaluate::{
-    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, PlanChoice, TaskEval, evaluate_task, mean_std,
+    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task, mean_std,
 };
 use schrl::run::joint::{JointConfig, JointMetrics, JointRunSettings, JointTrainer};
 use schrl::store::{self, Existing, MetricsLog, RunKind, RunWriter};
 use schrl::task::{Task, TaskKind};
 use sim::Robot;
-use sim::render::{ChartPanel, Goal, PathKind, Polyline, Scene};
+use sim::render::{ChartPanel, Goal, PathKind, Polyline, Scene, Series};
 use stl::Semantics;
 
 /// Arguments of `schrl train`. Flags left out take the default shown; with
@@ -72,11 +73,22 @@ pub struct TrainArgs {
     /// [default: 0.05].
     #[arg(long)]
     pretrain_length_weight: Option<f64>,
-    /// Also update the planner during the joint phase on r_h = ρ + r_l from the
-    /// executed runs (off: the pre-trained planner is kept and only the controller
-    /// learns on the task).
+    /// Keep the pre-trained planner fixed in the joint phase (ablation; by default it
+    /// learns from the executed runs, Algorithm 1).
     #[arg(long)]
-    joint_planner: bool,
+    freeze_planner: bool,
+    /// Runs from each start per iteration; each run's baseline is the others from its
+    /// start [default: 4].
+    #[arg(long)]
+    runs_per_start: Option<usize>,
+    /// Weight of the measured low-level reward r_l in the planner's update, relative to
+    /// the spec's unit-scale advantages [default: 0.3].
+    #[arg(long)]
+    control_weight: Option<f64>,
+    /// Weight per metre of the path-length term the planner follows in the joint phase
+    /// [default: 0.05].
+    #[arg(long)]
+    length_weight: Option<f64>,
     /// Keep the controller fixed (ablation).
     #[arg(long)]
     freeze_controller: bool,
@@ -113,9 +125,11 @@ impl TrainArgs {
             plan_batch: self.plan_batch.unwrap_or(defaults.plan_batch),
             goal_margin,
             safe_margin: self.safe_margin.unwrap_or(DEFAULT_SAFE_MARGIN),
-            freeze_planner: !self.joint_planner,
+            runs_per_start: self.runs_per_start.unwrap_or(defaults.runs_per_start),
+            control_weight: self.control_weight.unwrap_or(defaults.control_weight),
+            length_weight: self.length_weight.unwrap_or(defaults.length_weight),
+            freeze_planner: self.freeze_planner,
             freeze_controller: self.freeze_controller,
-            ..defaults
         };
         let cpg_defaults = CpgConfig::default();
         let seed = self.seed.unwrap_or(0);
@@ -181,7 +195,10 @@ impl TrainArgs {
                     "--pretrain-length-weight",
                     differs(&self.pretrain_length_weight, &saved.pretrain.length_weight),
                 ),
-                ("--joint-planner", self.joint_planner && saved.joint.freeze_planner),
+                ("--freeze-planner", self.freeze_planner && !saved.joint.freeze_planner),
+                ("--runs-per-start", differs(&self.runs_per_start, &saved.joint.runs_per_start)),
+                ("--control-weight", differs(&self.control_weight, &saved.joint.control_weight)),
+                ("--length-weight", differs(&self.length_weight, &saved.joint.length_weight)),
                 ("--freeze-controller", self.freeze_controller && !saved.joint.freeze_controller),
                 ("--goal-margin", differs(&self.goal_margin, &saved.joint.goal_margin)),
                 ("--safe-margin", differs(&self.safe_margin, &saved.joint.safe_margin)),
@@ -219,6 +236,20 @@ fn check_settings(s: &JointRunSettings) -> Result<()> {
     if s.joint.plan_batch == 0 {
         bail!("--plan-batch must be at least 1");
     }
+    let per_start = s.joint.runs_per_start;
+    if per_start == 0 || !s.joint.plan_batch.is_multiple_of(per_start) {
+        bail!(
+            "--runs-per-start must divide --plan-batch ({}) into whole groups, got {per_start}",
+            s.joint.plan_batch
+        );
+    }
+    for (flag, w) in
+        [("--control-weight", s.joint.control_weight), ("--length-weight", s.joint.length_weight)]
+    {
+        if !(w >= 0.0 && w.is_finite()) {
+            bail!("{flag} must be a non-negative number, got {w}");
+        }
+    }
     for (flag, metres) in [("--goal-margin", s.joint.goal_margin), ("--safe-margin", s.joint.safe_margin)] {
         if !(metres >= 0.0 && metres.is_finite()) {
             bail!("{flag} must be a non-negative number of metres, got {metres}");
@@ -255,6 +286,23 @@ pub struct EvalArgs {
     /// deployed plans).
     #[arg(long)]
     sampled_plans: bool,
+    /// Which planner makes the plans: the run's network, or the gradient planner
+    /// (waypoints optimised directly on the spec the network planned for, App. J).
+    #[arg(long, value_enum, default_value_t = PlannerChoice::Network)]
+    planner: PlannerChoice,
+    /// Drive with this `schrl control train` run's controller instead of the run's
+    /// (e.g. DIR/general: the general controller before joint training).
+    #[arg(long)]
+    controller: Option<PathBuf>,
+}
+
+/// The planner `schrl eval` executes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum PlannerChoice {
+    /// The run's trained planner network.
+    Network,
+    /// The gradient planner baseline.
+    Gradient,
 }
 
 fn load_task(robot: Robot, task: &str) -> Result<Task> {
@@ -375,10 +423,9 @@ pub fn train(args: TrainArgs) -> Result<()> {
     if settings.eval_groups > 0 {
         let eval = evaluate_task(
             &trainer.task,
-            trainer.plan.planner(),
+            Plans::Mean(trainer.plan.planner()),
             &trainer.control.controller(),
             (settings.eval_groups, EVAL_PER_GROUP),
-            PlanChoice::Mean,
             EVAL_SEED,
         )?;
         let png = out.join("episodes.png");
@@ -432,26 +479,40 @@ fn start_run(settings: &JointRunSettings, run: &mut RunWriter) -> Result<JointTr
     Ok(t)
 }
 
-/// Satisfaction of runs (orange) and of planned paths (blue), 0–1, on top; λ below;
-/// x: environment steps.
+/// Satisfaction of executed runs and of planned paths (0–1) on top, the mean
+/// low-level reward r_l in the middle, λ below; x: environment steps. Each a moving
+/// average over 20 iterations, so the curve shows the trend.
 fn save_curve(history: &[JointMetrics], out: &Path) -> Result<()> {
-    let series = |f: &dyn Fn(&JointMetrics) -> f64| -> Vec<(f64, f64)> {
-        // A moving average over 20 iterations, so the curve shows the trend.
-        (0..history.len())
+    let series = |label: &str, f: &dyn Fn(&JointMetrics) -> f64| Series {
+        label: label.into(),
+        points: (0..history.len())
             .map(|i| {
                 let w = &history[i.saturating_sub(19)..=i];
                 (history[i].env_steps as f64, w.iter().map(f).sum::<f64>() / w.len() as f64)
             })
-            .collect()
+            .collect(),
     };
     let panels = [
         ChartPanel {
-            series: vec![series(&|m| m.satisfaction), series(&|m| m.plan_satisfaction)],
+            series: vec![
+                series("executed runs", &|m| m.satisfaction),
+                series("planned paths", &|m| m.plan_satisfaction),
+            ],
             y_range: Some((0.0, 1.0)),
+            y_label: "satisfaction".into(),
         },
-        ChartPanel { series: vec![series(&|m| m.lambda)], y_range: None },
+        ChartPanel {
+            series: vec![series("r_l (−steps/limit; failures below −1)", &|m| m.low_level_reward)],
+            y_range: None,
+            y_label: "low-level reward".into(),
+        },
+        ChartPanel {
+            series: vec![series("λ (Lagrange multiplier of ρ ≥ ε)", &|m| m.lambda)],
+            y_range: None,
+            y_label: "λ".into(),
+        },
     ];
-    sim::render::save_chart(&panels, out, true)?;
+    sim::render::save_chart(&panels, "environment steps", out, true)?;
     Ok(())
 }
 
@@ -484,15 +545,32 @@ pub fn eval(args: EvalArgs) -> Result<()> {
         bail!("--groups and --per-group must be at least 1");
     }
     let t = store::joint::load(&args.ckpt).map_err(super::store_error)?;
-    let choice = if args.sampled_plans { PlanChoice::Sampled } else { PlanChoice::Mean };
-    let e = evaluate_task(
-        &t.task,
-        t.plan.planner(),
-        &t.control.controller(),
-        (args.groups, args.per_group),
-        choice,
-        args.seed,
-    )?;
+    if args.sampled_plans && args.planner == PlannerChoice::Gradient {
+        bail!("--sampled-plans samples the network's plans; it does not go with --planner gradient");
+    }
+    let plans = match (args.planner, args.sampled_plans) {
+        (PlannerChoice::Gradient, _) => {
+            Plans::Gradient { task: t.plan.task(), config: GradientPlannerConfig::default() }
+        }
+        (PlannerChoice::Network, true) => Plans::Sampled(t.plan.planner()),
+        (PlannerChoice::Network, false) => Plans::Mean(t.plan.planner()),
+    };
+    let controller = match &args.controller {
+        None => t.control.controller(),
+        Some(dir) => {
+            let c = store::controller::load(dir).map_err(super::store_error)?;
+            if c.config.robot != t.task.robot {
+                bail!(
+                    "--controller {}: a {} controller, but the run's task is for the {}",
+                    dir.display(),
+                    c.config.robot,
+                    t.task.robot
+                );
+            }
+            c.controller()
+        }
+    };
+    let e = evaluate_task(&t.task, plans, &controller, (args.groups, args.per_group), args.seed)?;
     if let Some(out) = &args.out {
         draw(&t.task, &e, out, args.force)?;
         println!("wrote {}", out.display());

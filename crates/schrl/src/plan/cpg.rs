@@ -421,7 +421,7 @@ impl PlanTrainer {
             f.net.forward(source, n, self.task.steps, &mut f.tape);
             let flat: Vec<f64> = f.tape.paths.iter().map(|v| *v as f64).collect();
             let rl = self.control.reward(&flat, self.task.steps, self.task.map.dim());
-            self.fast_update(&flat, &rl)?
+            self.fast_update(&flat, Terms::Batch { rl: &rl })?
         } else {
             let batch = self.sample(self.cfg.batch)?;
             let flat: Vec<f64> = batch.paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
@@ -443,6 +443,16 @@ impl PlanTrainer {
         self.planner.sample(&g0, &noise)
     }
 
+    /// Samples `per_start` paths from each of `starts` starts (rows `i·per_start ..`
+    /// share a start), so runs of one start can serve as each other's baseline.
+    pub fn sample_grouped(&mut self, starts: usize, per_start: usize) -> Result<PlanBatch> {
+        let g0 = self.task.sample_starts(&mut self.rng, starts)?;
+        let rows: Vec<u32> = (0..starts * per_start).map(|i| (i / per_start) as u32).collect();
+        let g0 = g0.index_select(&Tensor::new(rows, &Device::Cpu)?, 0)?;
+        let noise = self.task.sample_noise(&mut self.rng, starts * per_start)?;
+        self.planner.sample(&g0, &noise)
+    }
+
     /// One update on paths sampled by [`PlanTrainer::sample`] with their low-level
     /// rewards `r_l` (one per path): `r_h = ρ + r_l` drives the clipped policy
     /// gradient, and for CPG `λ·ρ` the constraint (Eq. 4).
@@ -451,86 +461,130 @@ impl PlanTrainer {
         if rl.len() != b {
             candle_core::bail!("{} low-level rewards for {b} paths", rl.len());
         }
+        self.step(batch, Terms::Batch { rl })
+    }
+
+    /// Algorithm 1's planner step in joint training: the score-function term on the
+    /// `executed` paths (sampled by this trainer since its last update) with the
+    /// advantages of their measured low-level rewards (`r_l` against its baseline,
+    /// already weighted), and the spec's terms (`λ ∇ρ` pathwise, the score function on
+    /// ρ, the dual step) on a fresh batch of [`CpgConfig::batch`] samples: planning
+    /// costs nothing next to executing, so the constraint is estimated on as many
+    /// paths as in pre-training rather than on the few the controller ran.
+    pub fn update_joint(&mut self, executed: &PlanBatch, advantages: &[f64]) -> Result<UpdateStats> {
+        let e = executed.paths.dim(0)?;
+        if advantages.len() != e {
+            candle_core::bail!("{} advantages for {e} executed paths", advantages.len());
+        }
+        let n = self.cfg.batch;
+        let fresh = if let Some(f) = &mut self.fast {
+            let starts: Vec<f32> = self.task.sample_starts(&mut self.rng, n)?.flatten_all()?.to_vec1()?;
+            let noise: Vec<f32> = self.task.sample_noise(&mut self.rng, n)?.flatten_all()?.to_vec1()?;
+            f.net.forward(Source::Sample { starts: &starts, noise: &noise }, n, self.task.steps, &mut f.tape);
+            let dims = (n, self.task.steps + 1, self.task.map.dim());
+            let paths = Tensor::from_slice(&f.tape.paths, dims, &Device::Cpu)?;
+            PlanBatch { log_prob: Tensor::zeros(n, DType::F32, &Device::Cpu)?, paths }
+        } else {
+            self.sample(n)?
+        };
+        let paths = Tensor::cat(&[&executed.paths.to_dtype(DType::F32)?, &fresh.paths], 0)?;
+        let log_prob = Tensor::cat(&[&executed.log_prob, &fresh.log_prob], 0)?;
+        self.step(&PlanBatch { paths, log_prob }, Terms::Joint { advantages })
+    }
+
+    /// One primal-dual step on `batch` with the terms `terms` says.
+    fn step(&mut self, batch: &PlanBatch, terms: Terms<'_>) -> Result<UpdateStats> {
         if let Some(f) = &mut self.fast {
+            let b = batch.paths.dim(0)?;
             let paths: Vec<f32> = batch.paths.to_dtype(DType::F32)?.flatten_all()?.to_vec1()?;
             f.net.forward(Source::Paths(&paths), b, self.task.steps, &mut f.tape);
             let flat: Vec<f64> = paths.iter().map(|v| *v as f64).collect();
-            return self.fast_update(&flat, rl);
+            return self.fast_update(&flat, terms);
         }
+        self.autodiff_update(batch, terms)
+    }
+
+    /// The update for the ablation planners, through candle's autodiff.
+    fn autodiff_update(&mut self, batch: &PlanBatch, terms: Terms<'_>) -> Result<UpdateStats> {
+        let b = batch.paths.dim(0)?;
         let rho = self.spec.robustness(&batch.paths, &self.cfg.semantics)?;
         let rho_v: Vec<f64> = rho.to_dtype(DType::F64)?.to_vec1()?;
-        // Advantages: r_h = ρ + r_l against the batch mean, normalised.
-        let rh: Vec<f64> = rho_v.iter().zip(rl).map(|(a, b)| a + b).collect();
-        let mean = rh.iter().sum::<f64>() / b as f64;
-        let std = (rh.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / b as f64).sqrt() + 1e-8;
-        let adv: Vec<f32> = rh.iter().map(|x| ((x - mean) / std) as f32).collect();
+        let (score, spec) = terms.weights(&rho_v, self.cfg.pg_weight);
+        let adv: Vec<f32> = score.iter().map(|a| *a as f32).collect();
         let adv = Tensor::from_vec(adv, b, &Device::Cpu)?;
-        // PPO-style clipped surrogate on the path likelihood ratio.
+        // PPO-style clipped surrogate on the path likelihood ratio (each row's
+        // advantage already carries its weight and 1/n).
         let logp = self.planner.log_prob(&batch.paths.detach())?;
         let ratio = (&logp - logp.detach())?.exp()?;
         let clipped = ratio.clamp(1.0 - self.cfg.clip, 1.0 + self.cfg.clip)?;
-        let surrogate = (&ratio * &adv)?.minimum(&(&clipped * &adv)?)?.mean_all()?;
-        let mut objective = (surrogate * self.cfg.pg_weight)?;
+        let mut objective = (&ratio * &adv)?.minimum(&(&clipped * &adv)?)?.sum_all()?;
+        let spec_rho = rho.narrow(0, spec.start, spec.len())?;
         if self.cfg.method == Method::Cpg {
-            objective = (objective + (rho.mean_all()? * self.lagrangian.lambda)?)?;
+            objective = (objective + (spec_rho.mean_all()? * self.lagrangian.lambda)?)?;
         }
         let loss = objective.neg()?;
         self.autodiff_step(&loss)?;
-        let mean_rho = rho_v.iter().sum::<f64>() / b as f64;
+        let mean_rho = rho_v[spec.clone()].iter().sum::<f64>() / spec.len() as f64;
         // The constraint is on the true (hard) robustness: smooth robustness can be
         // positive for a path that violates the spec (a softmax-weighted mean lies
         // between min and max), so the dual step reads the hard value.
-        let hard = self.hard_robustness(&batch.paths)?;
+        let hard = self.hard_robustness(&batch.paths.narrow(0, spec.start, spec.len())?)?;
         if self.cfg.method == Method::Cpg {
-            self.lagrangian.update(hard.iter().sum::<f64>() / b as f64);
+            self.lagrangian.update(hard.iter().sum::<f64>() / spec.len() as f64);
         }
-        let satisfaction = fraction_satisfied(&hard);
         Ok(UpdateStats {
             mean_rho,
-            satisfaction,
+            satisfaction: fraction_satisfied(&hard),
             lambda: self.lagrangian.lambda,
             loss: loss.to_dtype(DType::F64)?.to_scalar()?,
         })
     }
 
-    /// The update of [`PlanTrainer::update_on`] for the GRU-ODE, by hand
+    /// The update of [`PlanTrainer::step`] for the GRU-ODE, by hand
     /// ([`crate::plan::gru_ode_backprop`]): the forward pass over `paths` (`[batch][steps +
     /// 1][dim]`) is already on the tape. Same loss, same Adam, same dual step.
-    fn fast_update(&mut self, paths: &[f64], rl: &[f64]) -> Result<UpdateStats> {
-        let b = rl.len();
-        let steps = self.task.steps + 1;
+    fn fast_update(&mut self, paths: &[f64], terms: Terms<'_>) -> Result<UpdateStats> {
+        let dim = self.task.map.dim();
+        let per = (self.task.steps + 1) * dim;
         let stl_err = |e: stl::EvalError| candle_core::Error::Msg(format!("spec: {e}"));
         let mut drho = vec![0.0; paths.len()];
         let (rho, hard) = self
             .hard
-            .gradient_batch_and_robustness(paths, steps, &self.cfg.semantics, &mut drho, &Semantics::hard())
+            .gradient_batch_and_robustness(
+                paths,
+                self.task.steps + 1,
+                &self.cfg.semantics,
+                &mut drho,
+                &Semantics::hard(),
+            )
             .map_err(stl_err)?;
-        let rh: Vec<f64> = rho.iter().zip(rl).map(|(a, b)| a + b).collect();
-        let mean = rh.iter().sum::<f64>() / b as f64;
-        let std = (rh.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / b as f64).sqrt() + 1e-8;
-        let adv: Vec<f64> = rh.iter().map(|x| (x - mean) / std).collect();
         let w = self.cfg.pg_weight;
-        let score: Vec<f32> = adv.iter().map(|a| (w * a / b as f64) as f32).collect();
+        let (score, spec) = terms.weights(&rho, w);
+        let score32: Vec<f32> = score.iter().map(|a| *a as f32).collect();
         let lambda = if self.cfg.method == Method::Cpg { self.lagrangian.lambda } else { 0.0 };
-        let mut total: Vec<f64> = drho.iter().map(|g| g * lambda).collect();
-        self.control.add_gradient(paths, self.task.steps, self.task.map.dim(), &mut total);
-        let drho: Vec<f32> = total.iter().map(|g| (g / b as f64) as f32).collect();
+        let rows = spec.start * per..spec.end * per;
+        let mut total = vec![0.0; paths.len()];
+        total[rows.clone()].iter_mut().zip(&drho[rows.clone()]).for_each(|(t, g)| *t = g * lambda);
+        self.control.add_gradient(&paths[rows.clone()], self.task.steps, dim, &mut total[rows]);
+        let n = spec.len() as f64;
+        let drho: Vec<f32> = total.iter().map(|g| (g / n) as f32).collect();
         let f = self.fast.as_mut().expect("fast update");
         let FastUpdate { net, tape, grad } = f;
-        net.backward(tape, &drho, &score, grad);
+        net.backward(tape, &drho, &score32, grad);
         self.adam.step(&mut net.params, grad, self.cfg.lr as f32, f32::INFINITY);
         net.store(&self.varmap)?;
-        let mean_rho = rho.iter().sum::<f64>() / b as f64;
+        let mean_rho = rho[spec.clone()].iter().sum::<f64>() / n;
+        let hard = &hard[spec];
         if self.cfg.method == Method::Cpg {
-            self.lagrangian.update(hard.iter().sum::<f64>() / b as f64);
+            self.lagrangian.update(hard.iter().sum::<f64>() / n);
         }
-        // At ratio 1 the clipped surrogate is the mean advantage.
-        let surrogate = adv.iter().sum::<f64>() / b as f64;
+        // At ratio 1 the clipped surrogate is the weighted sum of advantages.
+        let surrogate = score.iter().sum::<f64>();
         Ok(UpdateStats {
             mean_rho,
-            satisfaction: fraction_satisfied(&hard),
+            satisfaction: fraction_satisfied(hard),
             lambda: self.lagrangian.lambda,
-            loss: -(w * surrogate + lambda * mean_rho),
+            loss: -(surrogate + lambda * mean_rho),
         })
     }
 
@@ -639,4 +693,47 @@ impl PlanTrainer {
 /// Fraction of hard robustness values above 0 (paths that satisfy the spec).
 fn fraction_satisfied(hard: &[f64]) -> f64 {
     hard.iter().filter(|r| **r > 0.0).count() as f64 / hard.len().max(1) as f64
+}
+
+/// Which paths of an update carry which terms of the objective.
+enum Terms<'a> {
+    /// Every path: `r_h = ρ + r_l` in the score function, advantages against the batch
+    /// mean divided by the batch's std; every path in the spec's terms.
+    Batch {
+        /// `r_l` of each path.
+        rl: &'a [f64],
+    },
+    /// The first `advantages.len()` paths were executed: the score function with these
+    /// advantages as they are (their scale is the reward's, not the std of a few
+    /// runs). The rest are fresh samples: the score function on ρ as in
+    /// [`Terms::Batch`] with `r_l = 0`, and the spec's terms.
+    Joint {
+        /// The executed paths' advantages.
+        advantages: &'a [f64],
+    },
+}
+
+impl Terms<'_> {
+    /// Each path's weight in the score-function term (`pg_weight · A / n` of its
+    /// group) and the rows that carry the spec's terms, given every path's `rho`.
+    fn weights(&self, rho: &[f64], pg_weight: f64) -> (Vec<f64>, std::ops::Range<usize>) {
+        let normalised = |rh: &[f64]| -> Vec<f64> {
+            let n = rh.len() as f64;
+            let mean = rh.iter().sum::<f64>() / n;
+            let std = (rh.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n).sqrt() + 1e-8;
+            rh.iter().map(|x| pg_weight * ((x - mean) / std) / n).collect()
+        };
+        match self {
+            Terms::Batch { rl } => {
+                let rh: Vec<f64> = rho.iter().zip(*rl).map(|(a, b)| a + b).collect();
+                (normalised(&rh), 0..rho.len())
+            }
+            Terms::Joint { advantages } => {
+                let e = advantages.len();
+                let mut w: Vec<f64> = advantages.iter().map(|a| pg_weight * a / e as f64).collect();
+                w.extend(normalised(&rho[e..]));
+                (w, e..rho.len())
+            }
+        }
+    }
 }

@@ -8,9 +8,10 @@
 //! [`SATISFYING`] of 200 validation starts, the shortest; else the most satisfying.
 //! While none satisfies, more candidates follow, up to three times as many; if still
 //! none does and the run plans with a safe margin, the candidates are trained again
-//! with the task's own clearance (the run's `safe_margin` becomes 0). The kept planner's
-//! λ restarts at its initial value, so the joint phase starts from plans that meet the
-//! spec with the constraint slack.
+//! with the task's own clearance (the run's `safe_margin` becomes 0). The kept planner
+//! goes on with its λ, Adam state and random stream: the joint phase continues its
+//! training (a λ reset to its initial value would weigh the constraint as at the
+//! start of pre-training, not as the planner has learnt it).
 //!
 //! Why each rule (measured on Point; README): every candidate uses its whole budget,
 //! because once the constraint is slack the length term keeps shortening the paths
@@ -20,7 +21,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::plan::cpg::{CpgConfig, NoControlReward, PathLengthReward, PlanTrainer};
+use crate::plan::cpg::{CpgConfig, PathLengthReward, PlanTrainer};
 use crate::run::joint::JointTrainer;
 use crate::task::Task;
 
@@ -126,9 +127,7 @@ pub fn pretrain(
     }
     Ok(best.map(|c| {
         let mut plan = c.trainer;
-        plan.set_control_reward(Box::new(NoControlReward));
-        let init = plan.config().lambda_init;
-        plan.set_lambda(init);
+        plan.set_control_reward(Box::new(PathLengthReward { weight: t.config.length_weight }));
         t.plan = plan;
         Pretrained {
             satisfaction: c.satisfaction,

@@ -5,6 +5,7 @@
 //!   start; satisfaction and steps to reach per group (the paper's protocol).
 //! * [`evaluate_controller`] — a controller alone: episodes to random goals.
 
+use candle_core::Tensor;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -15,6 +16,7 @@ use super::episode::{Episode, MeanActions, drive};
 use super::execute::{Execution, Outcome, WaypointDispatcher, start_run};
 use super::joint::paths_of;
 use crate::control::Controller;
+use crate::plan::gradient_planner::{self, GradientPlannerConfig};
 use crate::plan::planner::PathPlanner;
 use crate::task::Task;
 
@@ -61,27 +63,64 @@ pub fn mean_std(xs: &[f64]) -> (f64, f64) {
     (m, v.sqrt())
 }
 
-/// Which plan a deployed planner hands the controller.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum PlanChoice {
-    /// The Gaussian policy's mean path: the deployed plan (default). Sampling noise
-    /// (std ≥ 0.1 m per waypoint) exists for exploration while training; measured on
-    /// Point Seq, 62 % of sampled paths satisfied the spec and 100 % of mean paths.
-    #[default]
-    Mean,
-    /// A path sampled from the policy, as during training.
-    Sampled,
+/// Where the plans of an evaluation come from.
+#[derive(Clone, Copy)]
+pub enum Plans<'a> {
+    /// The planner's mean paths: the deployed plans (default). Sampling noise (std ≥
+    /// 0.1 m per waypoint) exists for exploration while training; measured on Point
+    /// Seq, 62 % of sampled paths satisfied the spec and 100 % of mean paths.
+    Mean(&'a PathPlanner),
+    /// Paths sampled from the planner, as during training.
+    Sampled(&'a PathPlanner),
+    /// The gradient planner (paper Fig. 4 (c), App. J): one plan per start, optimised
+    /// for `task` (give the task the network planned for, with its goal and safe
+    /// margins, so both planners face the same spec).
+    Gradient {
+        /// The task planned for.
+        task: &'a Task,
+        /// Its settings.
+        config: GradientPlannerConfig,
+    },
 }
 
-/// Evaluates a planner and controller on `task`: `groups × per_group` runs from
-/// random starts, each executing the plan `choice` picks with the controller's mean
-/// actions.
+impl Plans<'_> {
+    /// Plans from the starts `g0` (`[n, dim]`; `noise` is used by sampled plans).
+    fn plan(
+        &self,
+        task: &Task,
+        g0: &Tensor,
+        noise: &Tensor,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Vec<Vec<Vec<f64>>>, RunError> {
+        let paths = match self {
+            Plans::Mean(p) => paths_of(&p.mean_path(g0, task.steps)?)?,
+            Plans::Sampled(p) => paths_of(&p.sample(g0, noise)?.paths)?,
+            Plans::Gradient { task: planned, config } => {
+                let spec = planned.spec();
+                let starts: Vec<Vec<f64>> = g0.to_dtype(candle_core::DType::F64)?.to_vec2()?;
+                let dim = planned.map.dim();
+                starts
+                    .iter()
+                    .map(|s| {
+                        let p = gradient_planner::plan(planned, &spec, s, config, rng).map_err(|e| {
+                            RunError::Planner(candle_core::Error::Msg(format!("gradient planner: {e}")))
+                        })?;
+                        Ok(p.path.chunks(dim).map(|c| c.to_vec()).collect())
+                    })
+                    .collect::<Result<_, RunError>>()?
+            }
+        };
+        Ok(paths)
+    }
+}
+
+/// Evaluates plans and a controller on `task`: `groups × per_group` runs from random
+/// starts, each executing the plan `plans` gives with the controller's mean actions.
 pub fn evaluate_task(
     task: &Task,
-    planner: &PathPlanner,
+    plans: Plans<'_>,
     controller: &Controller,
     (groups, per_group): (usize, usize),
-    choice: PlanChoice,
     seed: u64,
 ) -> Result<TaskEval, RunError> {
     let spec = task.execution_spec();
@@ -97,11 +136,7 @@ pub fn evaluate_task(
     for _ in 0..groups {
         let g0 = task.sample_starts(&mut rng, per_group)?;
         let noise = task.sample_noise(&mut rng, per_group)?;
-        let planned = match choice {
-            PlanChoice::Mean => planner.mean_path(&g0, task.steps),
-            PlanChoice::Sampled => planner.sample(&g0, &noise).map(|b| b.paths),
-        };
-        let paths = paths_of(&planned?)?;
+        let paths = plans.plan(task, &g0, &noise, &mut rng)?;
         let mut envs = (0..paths.len())
             .map(|_| sim::make_env(controller.robot, task.map.clone()))
             .collect::<Result<Vec<_>, _>>()?;

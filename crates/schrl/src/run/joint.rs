@@ -1,13 +1,21 @@
 //! Joint hierarchical training (paper App. A, Algorithm 1) and task evaluation.
 //!
-//! Each iteration samples starts, plans a batch of paths with the GRU-ODE planner,
-//! and rolls the controller out through each path's waypoints (see [`crate::run::execute`]).
-//! The low-level reward of a path, `r_l`, is the controller's return on it (distance
-//! progress plus reach bonuses) times [`JointConfig::control_weight`]; the planner is
-//! updated with the constrained policy gradient on `r_h = ρ + r_l`, and the
-//! controller with PPO on the transitions of the same runs. Either side can be
-//! frozen (the paper's Fig. 4 ablations). The controller is usually warm-started
-//! from a general controller trained on random goals (as the authors did).
+//! Each iteration samples [`JointConfig::plan_batch`] paths from the GRU-ODE planner,
+//! [`JointConfig::runs_per_start`] from each start, and rolls the controller out
+//! through each path's waypoints (see [`crate::run::execute`]). Then:
+//!
+//! * the controller learns by PPO on the transitions of those runs;
+//! * the planner takes Algorithm 1's step ([`PlanTrainer::update_joint`]): the
+//!   score-function term on `r_l`, measured on each run ([`execution_reward`]: how
+//!   fast the plan was executed, failures below every success), with the other runs
+//!   from the same start as its baseline ([`leave_one_out`]), so the start's own
+//!   difficulty cancels; and the spec's terms (`λ ∇ρ`, the dual step on `ρ ≥ ε`) on a
+//!   fresh batch of sampled paths, as in pre-training, with pre-training's pathwise
+//!   path-length term ([`JointConfig::length_weight`]).
+//!
+//! Either side can be frozen (the paper's Fig. 4 ablations). The controller is usually
+//! warm-started from a general controller trained on random goals (as the authors
+//! did), the planner from pre-training on the spec ([`crate::plan::pretrain`]).
 
 use std::time::Instant;
 
@@ -22,7 +30,7 @@ use crate::control::normalize::RewardScaler;
 use crate::control::policy::PolicyCache;
 use crate::control::ppo::{RolloutBuffer, UpdateStats as PpoStats};
 use crate::control::trainer::normalize_obs;
-use crate::plan::cpg::{CpgConfig, PlanTrainer};
+use crate::plan::cpg::{CpgConfig, PathLengthReward, PlanTrainer};
 use crate::run::RunError;
 use crate::run::episode::{Driver, drive};
 use crate::run::evaluate::reach_steps;
@@ -34,10 +42,25 @@ use crate::task::Task;
 pub struct JointConfig {
     /// Paths planned and executed per iteration (reference: 8).
     pub plan_batch: usize,
-    /// Weight of the controller's return in `r_h = ρ + weight · return` (0.05: a
-    /// path whose waypoints are all reached earns about one unit per waypoint from
-    /// the reach bonus of 20, comparable to robustness in metres).
+    /// Weight of the measured low-level reward in the planner's score-function term,
+    /// relative to the spec's advantages (which are normalised to unit scale):
+    /// `A = weight · (r_l − baseline)` with `r_l` from [`execution_reward`] (0.3;
+    /// on Point Seq seed 0, 0.3, 1 and 10 kept satisfaction at 0.99–1.00, and
+    /// 10 disrupted the first iterations: plan satisfaction fell to 0.13 before it
+    /// recovered).
     pub control_weight: f64,
+    /// Weight per metre of the path-length term the planner keeps following pathwise
+    /// in the joint phase, as in pre-training (0.05, pre-training's; Point Seq seed 0:
+    /// without it the joint phase lengthened the deployed plans, 479 steps to reach
+    /// with it, 503 without, at control weight 0.3). Runs saved before it existed
+    /// used 0.
+    #[serde(default)]
+    pub length_weight: f64,
+    /// Runs from each start in an iteration (4): `plan_batch` must be a multiple.
+    /// Each run's baseline is the mean `r_l` of the others from its start; with 1,
+    /// the mean of the rest of the batch.
+    #[serde(default = "one")]
+    pub runs_per_start: usize,
     /// Keep the planner fixed.
     pub freeze_planner: bool,
     /// Keep the controller fixed (it then acts with its mean action).
@@ -60,13 +83,20 @@ impl Default for JointConfig {
     fn default() -> Self {
         Self {
             plan_batch: 8,
-            control_weight: 0.05,
+            control_weight: 0.3,
+            length_weight: 0.05,
+            runs_per_start: 4,
             freeze_planner: false,
             freeze_controller: false,
             goal_margin: 0.0,
             safe_margin: 0.0,
         }
     }
+}
+
+/// Runs saved before [`JointConfig::runs_per_start`] existed sampled one path per start.
+fn one() -> usize {
+    1
 }
 
 /// Every setting of a `schrl train` run: what its run directory's manifest holds,
@@ -128,6 +158,9 @@ pub struct JointMetrics {
     pub lambda: f64,
     /// The planner's loss (when it trained).
     pub plan_loss: Option<f64>,
+    /// Mean low-level reward `r_l` of the runs ([`execution_reward`]).
+    #[serde(default)]
+    pub low_level_reward: f64,
     /// PPO statistics (when the controller updated in this iteration).
     pub control: Option<PpoStats>,
     /// Environment steps per second in this iteration.
@@ -257,6 +290,23 @@ impl JointTrainer {
         if config.plan_batch == 0 {
             return Err(RunError::Setting { key: "plan_batch", message: "must be at least 1".into() });
         }
+        if config.runs_per_start == 0 || !config.plan_batch.is_multiple_of(config.runs_per_start) {
+            return Err(RunError::Setting {
+                key: "runs_per_start",
+                message: format!(
+                    "must divide plan_batch ({}) into whole groups, got {}",
+                    config.plan_batch, config.runs_per_start
+                ),
+            });
+        }
+        for (key, w) in [("control_weight", config.control_weight), ("length_weight", config.length_weight)] {
+            if !(w >= 0.0 && w.is_finite()) {
+                return Err(RunError::Setting {
+                    key,
+                    message: format!("must be a non-negative number, got {w}"),
+                });
+            }
+        }
         for (key, metres) in [("goal_margin", config.goal_margin), ("safe_margin", config.safe_margin)] {
             if !(metres >= 0.0 && metres.is_finite()) {
                 return Err(RunError::Setting {
@@ -266,7 +316,8 @@ impl JointTrainer {
             }
         }
         let planned = task.with_goal_margin(config.goal_margin).with_safe_margin(config.safe_margin);
-        let plan = PlanTrainer::new(planned, cpg)?;
+        let plan = PlanTrainer::new(planned, cpg)?
+            .with_control_reward(PathLengthReward { weight: config.length_weight });
         let envs = (0..config.plan_batch)
             .map(|_| sim::make_env(robot, task.map.clone()))
             .collect::<Result<Vec<_>, _>>()?;
@@ -290,17 +341,20 @@ impl JointTrainer {
     /// One iteration: plan, execute, update.
     pub fn iterate(&mut self) -> Result<JointMetrics, RunError> {
         let start = Instant::now();
-        let batch = self.plan.sample(self.config.plan_batch)?;
+        let per_start = self.config.runs_per_start;
+        let batch = self.plan.sample_grouped(self.config.plan_batch / per_start, per_start)?;
         let paths = paths_of(&batch.paths)?;
         let hard = self.plan.hard_robustness(&batch.paths)?;
         let learn = !self.config.freeze_controller;
         let runs = self.execute(&paths, learn)?;
         let steps: usize = runs.iter().map(|r| r.steps).sum();
         self.env_steps += steps;
-        let rl: Vec<f64> = runs.iter().map(|r| self.config.control_weight * r.control_return).collect();
+        let rl: Vec<f64> = runs.iter().map(|r| execution_reward(r, &self.task)).collect();
         let mut plan_loss = None;
         if !self.config.freeze_planner {
-            plan_loss = Some(self.plan.update_on(&batch, &rl)?.loss);
+            let w = self.config.control_weight;
+            let adv: Vec<f64> = leave_one_out(&rl, per_start).iter().map(|a| w * a).collect();
+            plan_loss = Some(self.plan.update_joint(&batch, &adv)?.loss);
         }
         let mut control = None;
         let ppo = &self.control.config.ppo;
@@ -329,6 +383,7 @@ impl JointTrainer {
                 .then(|| sat.iter().map(|r| reach_steps(r, &self.task)).sum::<f64>() / sat.len() as f64),
             lambda: self.plan.lagrangian().lambda,
             plan_loss,
+            low_level_reward: rl.iter().sum::<f64>() / n,
             control,
             steps_per_sec: steps as f64 / start.elapsed().as_secs_f64().max(1e-9),
         })
@@ -398,4 +453,33 @@ impl JointTrainer {
 /// A `[n, T+1, dim]` tensor as nested vectors.
 pub fn paths_of(t: &Tensor) -> candle_core::Result<Vec<Vec<Vec<f64>>>> {
     t.to_dtype(DType::F64)?.to_vec3()
+}
+
+/// The low-level reward `r_l` of one executed plan, in units of the task's step limit:
+/// `−steps / limit` for a run that satisfied the task (in `[−1, 0]`: faster is
+/// better), and `−2 + reached / waypoints` for one that did not (in `[−2, −1)`: below
+/// every success, better the further it got). Not the controller's return, whose
+/// distance-progress term restarts at every waypoint and so grows with the plan's
+/// length: the planner would learn to add detours.
+pub fn execution_reward(run: &Execution, task: &Task) -> f64 {
+    if run.satisfied() {
+        -(run.steps as f64) / task.step_limit.max(1) as f64
+    } else {
+        -2.0 + run.reached_at.len() as f64 / task.steps.max(1) as f64
+    }
+}
+
+/// Advantages against leave-one-out baselines: `r_i` minus the mean of the other
+/// rewards in its group of `group` consecutive entries (with `group` 1, of the rest of
+/// the batch). Each baseline is independent of its run, so the estimate stays
+/// unbiased, and runs from one start share their start's difficulty.
+pub fn leave_one_out(r: &[f64], group: usize) -> Vec<f64> {
+    let group = if group <= 1 { r.len() } else { group };
+    r.chunks(group)
+        .flat_map(|g| {
+            let sum: f64 = g.iter().sum();
+            let others = (g.len() - 1).max(1) as f64;
+            g.iter().map(move |x| if g.len() > 1 { x - (sum - x) / others } else { 0.0 })
+        })
+        .collect()
 }

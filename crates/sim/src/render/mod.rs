@@ -2,10 +2,11 @@
 //! trajectories, as PNG or SVG (chosen by the file extension).
 //!
 //! Ground maps are drawn from above. The Drone's world gets a top view (x, y) above
-//! a side view (x, z) at the same scale. Pictures carry no text, so no system fonts
-//! are needed: walls are grey, the duck yellow, goals green discs of their radius,
-//! planned waypoints blue dots joined by thin lines, executed trajectories orange,
-//! the robot a black circle with a line showing its heading.
+//! a side view (x, z) at the same scale, each with its axes in metres, under a legend:
+//! walls are grey, the duck yellow, goals green discs of their radius, planned
+//! waypoints blue dots joined by thin lines (another planner's purple), executed trajectories orange, the robot a
+//! black circle with a line showing its heading. Charts (training curves, result bars)
+//! are in [`save_chart`] and [`save_bars`]; text uses an embedded font (`style`).
 //!
 //! Files are written atomically (to a temporary name, then renamed) and an existing
 //! file is never replaced unless `overwrite` is set.
@@ -16,6 +17,16 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::map::Map;
+
+mod chart;
+mod style;
+
+pub use chart::{BarChart, BarPanel, ChartPanel, Series, save_bars, save_chart};
+pub use style::tick_label;
+use style::{
+    COMPARED, DUCK, EXECUTED, GOAL, GRID, LEGEND_HEIGHT, LegendEntry, Mark, PLANNED, WALL, axes, draw_legend,
+    write_picture,
+};
 
 /// A goal region: centre (plan space) and radius.
 #[derive(Clone, Debug, PartialEq)]
@@ -33,6 +44,9 @@ pub enum PathKind {
     Planned,
     /// Where the robot went.
     Executed,
+    /// Waypoints from another planner, drawn beside [`PathKind::Planned`] for
+    /// comparison (named by [`Scene::compared_label`]).
+    Compared,
 }
 
 /// A sequence of plan-space points.
@@ -66,12 +80,29 @@ pub struct Scene {
     pub paths: Vec<Polyline>,
     /// Robots.
     pub robots: Vec<RobotMarker>,
+    /// The legend's names of planned and compared waypoints.
+    pub labels: PathLabels,
+}
+
+/// What the legend calls planned and compared waypoints.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PathLabels {
+    /// [`PathKind::Planned`] (default "planned waypoints").
+    pub planned: String,
+    /// [`PathKind::Compared`] (default "compared waypoints").
+    pub compared: String,
+}
+
+impl Default for PathLabels {
+    fn default() -> Self {
+        Self { planned: "planned waypoints".into(), compared: "compared waypoints".into() }
+    }
 }
 
 impl Scene {
     /// An empty scene on `map`.
     pub fn new(map: Map) -> Self {
-        Self { map, goals: Vec::new(), paths: Vec::new(), robots: Vec::new() }
+        Self { map, goals: Vec::new(), paths: Vec::new(), robots: Vec::new(), labels: PathLabels::default() }
     }
 }
 
@@ -95,12 +126,8 @@ pub enum RenderError {
 }
 
 const PX_PER_M: f64 = 100.0;
-const WALL: RGBColor = RGBColor(90, 90, 96);
-const DUCK: RGBColor = RGBColor(240, 200, 40);
-const GOAL: RGBColor = RGBColor(40, 170, 80);
-const PLANNED: RGBColor = RGBColor(40, 90, 220);
-const EXECUTED: RGBColor = RGBColor(240, 120, 20);
-const GRID: RGBColor = RGBColor(232, 232, 236);
+/// Room around a panel's plot for the axes' tick labels and titles (px).
+const AXES: (u32, u32) = (72, 56);
 
 /// Which two coordinates a panel shows.
 #[derive(Clone, Copy)]
@@ -111,9 +138,15 @@ struct View {
 }
 
 impl View {
+    /// The panel's size: the plot at [`PX_PER_M`] (at most 4000 px a side) and its axes.
     fn size(&self) -> (u32, u32) {
         let px = |r: f64| (r * PX_PER_M).clamp(1.0, 4000.0) as u32;
-        (px(self.x.1 - self.x.0), px(self.y.1 - self.y.0))
+        (px(self.x.1 - self.x.0) + AXES.0, px(self.y.1 - self.y.0) + AXES.1)
+    }
+
+    /// The vertical axis's title.
+    fn y_title(&self) -> &'static str {
+        if self.axes.1 == 2 { "z (m)" } else { "y (m)" }
     }
 
     fn project(&self, p: &[f64]) -> (f64, f64) {
@@ -179,9 +212,21 @@ where
     DB::ErrorType: 'static,
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    let mut chart: Chart<'_, DB> =
-        ChartBuilder::on(area).build_cartesian_2d(view.x.0..view.x.1, view.y.0..view.y.1).map_err(err)?;
-    // A 1 m grid.
+    let mut chart: Chart<'_, DB> = ChartBuilder::on(area)
+        .margin_right(16)
+        .margin_top(8)
+        .x_label_area_size(AXES.1 - 8)
+        .y_label_area_size(AXES.0 - 16)
+        .build_cartesian_2d(view.x.0..view.x.1, view.y.0..view.y.1)
+        .map_err(err)?;
+    // A 1 m grid, labelled.
+    let lines = |r: (f64, f64)| ((r.1.floor() - r.0.ceil()) as usize + 1).max(2);
+    axes(&mut chart, "x (m)", view.y_title())
+        .x_labels(lines(view.x))
+        .y_labels(lines(view.y))
+        .disable_mesh()
+        .draw()
+        .map_err(err)?;
     for k in (view.x.0.ceil() as i32)..=(view.x.1.floor() as i32) {
         let k = k as f64;
         chart
@@ -241,12 +286,13 @@ where
                     .draw_series(std::iter::once(PathElement::new(pts, EXECUTED.stroke_width(2))))
                     .map_err(err)?;
             }
-            PathKind::Planned => {
+            PathKind::Planned | PathKind::Compared => {
+                let colour = if path.kind == PathKind::Planned { PLANNED } else { COMPARED };
                 chart
-                    .draw_series(std::iter::once(PathElement::new(pts.clone(), PLANNED.stroke_width(1))))
+                    .draw_series(std::iter::once(PathElement::new(pts.clone(), colour.stroke_width(1))))
                     .map_err(err)?;
                 chart
-                    .draw_series(pts.into_iter().map(|p| Circle::new(p, 4, PLANNED.filled())))
+                    .draw_series(pts.into_iter().map(|p| Circle::new(p, 4, colour.filled())))
                     .map_err(err)?;
             }
         }
@@ -273,7 +319,8 @@ where
 {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let vs = views(scene);
-    let mut rest = root.clone();
+    let (top, mut rest) = root.split_vertically(LEGEND_HEIGHT);
+    draw_legend(&top, &legend(scene))?;
     for v in vs {
         let (_, h) = v.size();
         let (panel, below) = rest.split_vertically(h);
@@ -283,11 +330,39 @@ where
     root.present().map_err(|e| e.to_string())
 }
 
-/// The picture's size in pixels (100 px per metre, at most 4000 px a side).
+/// The legend of what `scene` shows.
+fn legend(scene: &Scene) -> Vec<LegendEntry> {
+    let entry = |label: &str, color, mark| LegendEntry { label: label.into(), color, mark };
+    let mut out = Vec::new();
+    match scene.map {
+        Map::Walls(_) => out.push(entry("walls", WALL, Mark::Patch)),
+        Map::Duck(_) => out.push(entry("duck", DUCK, Mark::Patch)),
+        Map::Empty(_) | Map::Floor => {}
+    }
+    if !scene.goals.is_empty() {
+        out.push(entry("goals", GOAL, Mark::Patch));
+    }
+    if scene.paths.iter().any(|p| p.kind == PathKind::Planned) {
+        out.push(entry(&scene.labels.planned, PLANNED, Mark::Dots));
+    }
+    if scene.paths.iter().any(|p| p.kind == PathKind::Compared) {
+        out.push(entry(&scene.labels.compared, COMPARED, Mark::Dots));
+    }
+    if scene.paths.iter().any(|p| p.kind == PathKind::Executed) {
+        out.push(entry("executed trajectory", EXECUTED, Mark::Line));
+    }
+    if !scene.robots.is_empty() {
+        out.push(entry("robot", BLACK, Mark::Line));
+    }
+    out
+}
+
+/// The picture's size in pixels: 100 px per metre (at most 4000 px a side), axes and
+/// the legend.
 pub fn image_size(scene: &Scene) -> (u32, u32) {
     let vs = views(scene);
     let w = vs.iter().map(|v| v.size().0).max().unwrap_or(0);
-    (w, vs.iter().map(|v| v.size().1).sum())
+    (w, LEGEND_HEIGHT + vs.iter().map(|v| v.size().1).sum::<u32>())
 }
 
 /// Draws `scene` to `out` (`.png` or `.svg`); refuses to replace an existing file
@@ -320,7 +395,10 @@ pub fn save_field(
         .flat_map(|j| (0..nx).map(move |i| (i, j)))
         .map(|(i, j)| field(&[lo[0] + (i as f64 + 0.5) * cell, lo[1] + (j as f64 + 0.5) * cell]))
         .collect();
-    let size = (((hi[0] - lo[0]) * PX_PER_M) as u32, ((hi[1] - lo[1]) * PX_PER_M) as u32);
+    let size = (
+        ((hi[0] - lo[0]) * PX_PER_M) as u32 + AXES.0,
+        ((hi[1] - lo[1]) * PX_PER_M) as u32 + AXES.1 + LEGEND_HEIGHT,
+    );
     write_picture(
         out,
         overwrite,
@@ -343,8 +421,25 @@ where
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     let (lo, hi) = map.region();
     root.fill(&WHITE).map_err(err)?;
-    let mut chart: Chart<'_, DB> =
-        ChartBuilder::on(&root).build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1]).map_err(err)?;
+    let (top, plot) = root.split_vertically(LEGEND_HEIGHT);
+    let entry = |label: &str, color, mark| LegendEntry { label: label.into(), color, mark };
+    draw_legend(
+        &top,
+        &[
+            entry("positive", RGBColor(120, 120, 255), Mark::Patch),
+            entry("negative", RGBColor(255, 120, 120), Mark::Patch),
+            entry("zero level (learned surface)", BLACK, Mark::Line),
+            entry("true obstacles", WALL, Mark::Line),
+        ],
+    )?;
+    let mut chart: Chart<'_, DB> = ChartBuilder::on(&plot)
+        .margin_right(16)
+        .margin_top(8)
+        .x_label_area_size(AXES.1 - 8)
+        .y_label_area_size(AXES.0 - 16)
+        .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
+        .map_err(err)?;
+    axes(&mut chart, "x (m)", "y (m)").disable_mesh().draw().map_err(err)?;
     let at = |i: usize, j: usize| values[j * nx + i];
     let cells = (0..ny).flat_map(|j| (0..nx).map(move |i| (i, j))).map(|(i, j)| {
         let v = at(i, j);
@@ -370,126 +465,4 @@ where
         chart.draw_series(outlines).map_err(err)?;
     }
     root.present().map_err(|e| e.to_string())
-}
-
-/// One panel of a line chart: series of `(x, y)` points drawn in the palette's
-/// colours (first series orange, then blue, green, grey), y from `y_range` (or the
-/// data's range when `None`).
-#[derive(Clone, Debug, PartialEq)]
-pub struct ChartPanel {
-    /// The series.
-    pub series: Vec<Vec<(f64, f64)>>,
-    /// Fixed y range, e.g. `(0, 1)` for rates.
-    pub y_range: Option<(f64, f64)>,
-}
-
-const SERIES: [RGBColor; 4] = [EXECUTED, PLANNED, GOAL, WALL];
-
-/// Writes line-chart panels stacked top to bottom (800 × 240 px each) to `out`
-/// (`.png` or `.svg`): training curves. Light grid lines mark round numbers on
-/// both axes; the y = 0 line is darker. Refuses to replace a file unless `overwrite`.
-pub fn save_chart(panels: &[ChartPanel], out: &Path, overwrite: bool) -> Result<(), RenderError> {
-    let size = (800, 240 * panels.len().max(1) as u32);
-    write_picture(out, overwrite, size, |root| draw_chart(root, panels), |root| draw_chart(root, panels))
-}
-
-/// A "nice" grid step (1, 2 or 5 × 10^k) giving about 5–10 lines over `span`.
-fn grid_step(span: f64) -> f64 {
-    let raw = span / 6.0;
-    let mag = 10f64.powf(raw.log10().floor());
-    [1.0, 2.0, 5.0, 10.0].into_iter().map(|m| m * mag).find(|s| *s >= raw).unwrap_or(10.0 * mag)
-}
-
-fn draw_chart<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, panels: &[ChartPanel]) -> Result<(), String>
-where
-    DB::ErrorType: 'static,
-{
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    root.fill(&WHITE).map_err(err)?;
-    let areas = root.split_evenly((panels.len().max(1), 1));
-    for (panel, area) in panels.iter().zip(areas) {
-        let pts = || panel.series.iter().flatten().filter(|(x, y)| x.is_finite() && y.is_finite());
-        let (mut x0, mut x1) = pts().fold((f64::MAX, f64::MIN), |(a, b), (x, _)| (a.min(*x), b.max(*x)));
-        let (mut y0, mut y1) = match panel.y_range {
-            Some(r) => r,
-            None => pts().fold((f64::MAX, f64::MIN), |(a, b), (_, y)| (a.min(*y), b.max(*y))),
-        };
-        if x0 > x1 {
-            (x0, x1) = (0.0, 1.0);
-        }
-        if y0 > y1 {
-            (y0, y1) = (0.0, 1.0);
-        }
-        if x1 - x0 < 1e-12 {
-            x1 = x0 + 1.0;
-        }
-        if y1 - y0 < 1e-12 {
-            (y0, y1) = (y0 - 0.5, y1 + 0.5);
-        }
-        let pad = 0.05 * (y1 - y0);
-        let area = area.margin(12, 12, 16, 16);
-        let mut chart =
-            ChartBuilder::on(&area).build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad)).map_err(err)?;
-        let (gx, gy) = (grid_step(x1 - x0), grid_step(y1 - y0));
-        let mut k = (x0 / gx).ceil();
-        while k * gx <= x1 {
-            let line = PathElement::new(vec![(k * gx, y0 - pad), (k * gx, y1 + pad)], GRID);
-            chart.draw_series(std::iter::once(line)).map_err(err)?;
-            k += 1.0;
-        }
-        let mut k = ((y0 - pad) / gy).ceil();
-        while k * gy <= y1 + pad {
-            let colour = if k == 0.0 { WALL } else { GRID };
-            let line = PathElement::new(vec![(x0, k * gy), (x1, k * gy)], colour);
-            chart.draw_series(std::iter::once(line)).map_err(err)?;
-            k += 1.0;
-        }
-        for (i, series) in panel.series.iter().enumerate() {
-            let line: Vec<(f64, f64)> =
-                series.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite()).collect();
-            let style = SERIES[i % SERIES.len()].stroke_width(2);
-            chart.draw_series(std::iter::once(PathElement::new(line, style))).map_err(err)?;
-        }
-        area.draw(&Rectangle::new(
-            [(0, 0), (area.dim_in_pixel().0 as i32 - 1, area.dim_in_pixel().1 as i32 - 1)],
-            WALL,
-        ))
-        .map_err(err)?;
-    }
-    root.present().map_err(err)
-}
-
-/// Writes a picture of `size` pixels to `out` through a temporary file and a rename,
-/// choosing the backend by extension.
-fn write_picture(
-    out: &Path,
-    overwrite: bool,
-    size: (u32, u32),
-    png: impl FnOnce(DrawingArea<BitMapBackend, Shift>) -> Result<(), String>,
-    svg: impl FnOnce(DrawingArea<SVGBackend, Shift>) -> Result<(), String>,
-) -> Result<(), RenderError> {
-    let ext = out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    if !matches!(ext.as_deref(), Some("png" | "svg")) {
-        return Err(RenderError::Format(out.to_path_buf()));
-    }
-    if out.exists() && !overwrite {
-        return Err(RenderError::Exists(out.to_path_buf()));
-    }
-    let ext = ext.unwrap();
-    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("picture");
-    let tmp = out.with_file_name(format!(".{stem}.{}.tmp.{ext}", std::process::id()));
-    let result = if ext == "png" {
-        png(BitMapBackend::new(&tmp, size).into_drawing_area())
-    } else {
-        svg(SVGBackend::new(&tmp, size).into_drawing_area())
-    };
-    let fail = |message: String| RenderError::Write { path: out.to_path_buf(), message };
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(fail(e));
-    }
-    std::fs::rename(&tmp, out).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        fail(e.to_string())
-    })
 }

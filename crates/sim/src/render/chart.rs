@@ -1,0 +1,219 @@
+//! Charts: line charts of training curves and grouped bar charts of results, each
+//! panel with axis titles, tick labels and a legend.
+
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::RenderError;
+use super::style::{
+    DUCK, EXECUTED, GOAL, LEGEND_HEIGHT, LegendEntry, Mark, PLANNED, WALL, axes, draw_legend, text,
+    write_picture,
+};
+
+/// Series colours in order: orange, blue, green, grey, yellow.
+const PALETTE: [RGBColor; 5] = [EXECUTED, PLANNED, GOAL, WALL, DUCK];
+
+/// One line of a chart.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Series {
+    /// Its name in the legend.
+    pub label: String,
+    /// Its `(x, y)` points; non-finite ones are skipped.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// One panel of a line chart.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChartPanel {
+    /// The lines, drawn in the palette's colours (orange, blue, green, grey, yellow).
+    pub series: Vec<Series>,
+    /// Fixed y range, e.g. `(0, 1)` for rates; `None`: the data's.
+    pub y_range: Option<(f64, f64)>,
+    /// The y axis's title.
+    pub y_label: String,
+}
+
+/// Panel size of line charts (px).
+const PANEL: (u32, u32) = (820, 280);
+
+/// Writes line-chart panels stacked top to bottom to `out` (`.png` or `.svg`): each
+/// with its legend above it, its y title, tick labels, and `x_label` under the x axis
+/// shared by all. Refuses to replace a file unless `overwrite`.
+pub fn save_chart(
+    panels: &[ChartPanel],
+    x_label: &str,
+    out: &Path,
+    overwrite: bool,
+) -> Result<(), RenderError> {
+    let size = (PANEL.0, PANEL.1 * panels.len().max(1) as u32);
+    write_picture(
+        out,
+        overwrite,
+        size,
+        |root| draw_chart(root, panels, x_label),
+        |root| draw_chart(root, panels, x_label),
+    )
+}
+
+/// The extent of `values`, widened when empty or flat.
+fn extent(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) =
+        values.filter(|v| v.is_finite()).fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+    if lo > hi {
+        (lo, hi) = (0.0, 1.0);
+    }
+    if hi - lo < 1e-12 {
+        (lo, hi) = (lo - 0.5, hi + 0.5);
+    }
+    (lo, hi)
+}
+
+fn legend(labels: impl Iterator<Item = String>, mark: Mark) -> Vec<LegendEntry> {
+    labels
+        .enumerate()
+        .map(|(i, label)| LegendEntry { label, color: PALETTE[i % PALETTE.len()], mark })
+        .collect()
+}
+
+fn draw_chart<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    panels: &[ChartPanel],
+    x_label: &str,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(err)?;
+    let areas = root.split_evenly((panels.len().max(1), 1));
+    for (panel, area) in panels.iter().zip(areas) {
+        let (top, plot) = area.split_vertically(LEGEND_HEIGHT);
+        draw_legend(&top, &legend(panel.series.iter().map(|s| s.label.clone()), Mark::Line))?;
+        let pts = || panel.series.iter().flat_map(|s| s.points.iter());
+        let (x0, x1) = extent(pts().map(|p| p.0));
+        let (y0, y1) = panel.y_range.unwrap_or_else(|| extent(pts().map(|p| p.1)));
+        let pad = 0.05 * (y1 - y0);
+        let mut chart = ChartBuilder::on(&plot)
+            .margin_right(20)
+            .margin_bottom(6)
+            .x_label_area_size(44)
+            .y_label_area_size(64)
+            .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
+            .map_err(err)?;
+        axes(&mut chart, x_label, &panel.y_label).draw().map_err(err)?;
+        for (i, s) in panel.series.iter().enumerate() {
+            let line: Vec<(f64, f64)> =
+                s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite()).collect();
+            let style = PALETTE[i % PALETTE.len()].stroke_width(2);
+            chart.draw_series(std::iter::once(PathElement::new(line, style))).map_err(err)?;
+        }
+    }
+    root.present().map_err(err)
+}
+
+/// One panel of a grouped bar chart.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BarPanel {
+    /// The y axis's title.
+    pub y_label: String,
+    /// Bar heights, `[series][group]`; a non-finite value draws no bar.
+    pub values: Vec<Vec<f64>>,
+    /// Error-bar half-lengths in the same layout (e.g. a std), if any.
+    pub errors: Option<Vec<Vec<f64>>>,
+    /// Fixed y range; `None`: from 0 to the tallest bar.
+    pub y_range: Option<(f64, f64)>,
+}
+
+/// A grouped bar chart: one bar per series in each group, panels stacked.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BarChart {
+    /// Group names along the x axis.
+    pub groups: Vec<String>,
+    /// Series names, in the legend.
+    pub series: Vec<String>,
+    /// The panels (each its own measure).
+    pub panels: Vec<BarPanel>,
+}
+
+/// Writes `chart` to `out` (`.png` or `.svg`); refuses to replace a file unless
+/// `overwrite`.
+pub fn save_bars(chart: &BarChart, out: &Path, overwrite: bool) -> Result<(), RenderError> {
+    let width = (140 * chart.groups.len().max(1) as u32 + 120).max(PANEL.0);
+    let size = (width, LEGEND_HEIGHT + PANEL.1 * chart.panels.len().max(1) as u32);
+    write_picture(out, overwrite, size, |root| draw_bars(root, chart), |root| draw_bars(root, chart))
+}
+
+fn draw_bars<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, bars: &BarChart) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(err)?;
+    let (top, rest) = root.split_vertically(LEGEND_HEIGHT);
+    draw_legend(&top, &legend(bars.series.iter().cloned(), Mark::Patch))?;
+    let n_groups = bars.groups.len().max(1);
+    let n_series = bars.series.len().max(1);
+    let width = 0.8 / n_series as f64;
+    for (panel, area) in bars.panels.iter().zip(rest.split_evenly((bars.panels.len().max(1), 1))) {
+        let tallest = panel
+            .values
+            .iter()
+            .zip(0..)
+            .flat_map(|(vs, s)| {
+                vs.iter().enumerate().map(move |(g, v)| {
+                    v + panel
+                        .errors
+                        .as_ref()
+                        .and_then(|e| e.get(s))
+                        .and_then(|e| e.get(g))
+                        .copied()
+                        .unwrap_or(0.0)
+                })
+            })
+            .filter(|v| v.is_finite())
+            .fold(0.0f64, f64::max);
+        let (y0, y1) = panel.y_range.unwrap_or((0.0, if tallest > 0.0 { 1.1 * tallest } else { 1.0 }));
+        let mut chart = ChartBuilder::on(&area)
+            .margin_right(20)
+            .margin_top(8)
+            .x_label_area_size(30)
+            .y_label_area_size(64)
+            .build_cartesian_2d(0.0..n_groups as f64, y0..y1)
+            .map_err(err)?;
+        axes(&mut chart, "", &panel.y_label).disable_x_mesh().x_labels(0).draw().map_err(err)?;
+        for (s, values) in panel.values.iter().enumerate() {
+            let color = PALETTE[s % PALETTE.len()];
+            for (g, v) in values.iter().enumerate().filter(|(_, v)| v.is_finite()) {
+                let x = g as f64 + 0.1 + s as f64 * width;
+                let bar = Rectangle::new([(x, y0), (x + width * 0.92, v.min(y1))], color.filled());
+                chart.draw_series(std::iter::once(bar)).map_err(err)?;
+                let e = panel.errors.as_ref().and_then(|e| e.get(s)).and_then(|e| e.get(g)).copied();
+                if let Some(e) = e.filter(|e| e.is_finite() && *e > 0.0) {
+                    let c = x + width * 0.46;
+                    let (lo, hi) = ((v - e).max(y0), (v + e).min(y1));
+                    let whisker = [
+                        vec![(c, lo), (c, hi)],
+                        vec![(c - width * 0.2, lo), (c + width * 0.2, lo)],
+                        vec![(c - width * 0.2, hi), (c + width * 0.2, hi)],
+                    ];
+                    chart
+                        .draw_series(whisker.into_iter().map(|p| PathElement::new(p, BLACK.stroke_width(1))))
+                        .map_err(err)?;
+                }
+            }
+        }
+        // Group names centred under their bars.
+        let style = text(14).pos(plotters::style::text_anchor::Pos::new(
+            plotters::style::text_anchor::HPos::Center,
+            plotters::style::text_anchor::VPos::Top,
+        ));
+        for (g, name) in bars.groups.iter().enumerate() {
+            let (px, py) = chart.backend_coord(&(g as f64 + 0.5, y0));
+            let (ax, ay) = area.get_base_pixel();
+            area.draw(&Text::new(name.clone(), (px - ax, py - ay + 8), style.clone())).map_err(err)?;
+        }
+    }
+    root.present().map_err(err)
+}

@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# The paper's Fig. 4 on executed runs: for every Point task and seed, (a) SCHRL as
+# trained by default, (b) the run's general controller in place of the jointly
+# trained one, (c) gradient-planner plans executed by the jointly trained controller,
+# (d) a run trained with the planner frozen after pre-training. Writes
+# OUT/fig4.csv (one row per run) and OUT/fig4.png / .svg (bars normalised per task).
+# Needs the runs of scripts/joint-results.sh: DEFAULT_DIR/point-<task>-<seed> (default)
+# and FROZEN_DIR/point-<task>-<seed> (EXTRA="--freeze-planner").
+# Usage: [TASKS="seq cover"] [GRADIENT_EVAL="--groups 5 --per-group 20"] \
+#        scripts/fig4.sh DEFAULT_DIR FROZEN_DIR OUT [SEEDS...]
+set -euo pipefail
+default=$1 frozen=$2 out=$3
+shift 3
+seeds=("${@:-0 1 2 3 4}")
+read -r -a seeds <<<"${seeds[*]}"
+read -r -a tasks <<<"${TASKS:-seq cover branch loop signal}"
+read -r -a gradient_eval <<<"${GRADIENT_EVAL:-}"
+export RAYON_NUM_THREADS=1
+bin=${SCHRL_BIN:-}
+if [[ -z "$bin" ]]; then
+  cargo build --release -q -p schrl-cli
+  bin=./target/release/schrl
+fi
+mkdir -p "$out"
+csv="$out/fig4.csv"
+echo "task,variant,seed,satisfaction,steps_to_reach" >"$csv"
+row() { # task variant seed eval-output
+  local sat steps
+  sat=$(grep '^satisfaction:' <<<"$4" | awk '{print $2}')
+  steps=$(grep '^steps to reach:' <<<"$4" | awk '{print $4}')
+  echo "$1,$2,$3,$sat,${steps:--}" | tee -a "$csv"
+}
+for task in "${tasks[@]}"; do
+  for seed in "${seeds[@]}"; do
+    run="$default/point-$task-$seed"
+    row "$task" "(a) SCHRL" "$seed" "$("$bin" eval --ckpt "$run")"
+    row "$task" "(b) general controller" "$seed" "$("$bin" eval --ckpt "$run" --controller "$run/general")"
+    row "$task" "(c) gradient planner" "$seed" "$("$bin" eval --ckpt "$run" --planner gradient "${gradient_eval[@]}")"
+    row "$task" "(d) frozen planner" "$seed" "$("$bin" eval --ckpt "$frozen/point-$task-$seed")"
+  done
+done
+"$bin" plot bars --results "$csv" --out "$out/fig4.png" --force
+"$bin" plot bars --results "$csv" --out "$out/fig4.svg" --force
