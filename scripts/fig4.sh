@@ -17,11 +17,8 @@ read -r -a seeds <<<"${seeds[*]}"
 read -r -a tasks <<<"${TASKS:-seq cover branch loop signal}"
 read -r -a gradient_eval <<<"${GRADIENT_EVAL:-}"
 export RAYON_NUM_THREADS=1
-bin=${SCHRL_BIN:-}
-if [[ -z "$bin" ]]; then
-  cargo build --release -q -p schrl-cli
-  bin=./target/release/schrl
-fi
+source "$(dirname "${BASH_SOURCE[0]}")/summary.sh"
+schrl_bin
 mkdir -p "$out"
 csv="$out/fig4.csv" sampled="$out/sampled.csv"
 for f in "$csv" "$sampled"; do echo "task,variant,seed,satisfaction,steps_to_reach" >"$f"; done

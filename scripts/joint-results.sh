@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Trains and evaluates every Point task with the README's defaults (`schrl train`:
 # general controller, planner pre-training, 3 M joint steps, 5 × 100 evaluation
-# runs) over seeds, printing one line per run and a mean ± std over seeds per task
-# (README, "Joint training results").
+# runs of mean paths, and the same evaluation executing sampled plans) over seeds,
+# printing one line per run and a mean ± std over seeds per task (README, "Joint
+# training results"). EXTRA="--freeze-planner": the frozen-planner ablation.
 # Usage: [TASKS="seq cover"] [EXTRA="--planner mlp"] [SCHRL_BIN=path] scripts/joint-results.sh [OUT_DIR] [SEEDS...]
 # (SCHRL_BIN: run that binary instead of building target/release/schrl, e.g. a copy
 # that stays put while the tree changes)
@@ -13,16 +14,12 @@ shift || true
 seeds=("${@:-0 1 2}")
 read -r -a seeds <<<"${seeds[*]}"
 export RAYON_NUM_THREADS=1
-bin=${SCHRL_BIN:-}
-if [[ -z "$bin" ]]; then
-  cargo build --release -q -p schrl-cli
-  bin=./target/release/schrl
-fi
 source "$(dirname "${BASH_SOURCE[0]}")/summary.sh"
+schrl_bin
 read -r -a tasks <<<"${TASKS:-seq cover branch loop signal}"
 read -r -a extra <<<"${EXTRA:-}"
 for task in "${tasks[@]}"; do
-  sats=() reach=() secs=()
+  sats=() reach=() secs=() samples=()
   for seed in "${seeds[@]}"; do
     dir="$out/point-$task-$seed"
     start=$(date +%s.%N)
@@ -31,12 +28,16 @@ for task in "${tasks[@]}"; do
     sat=$(grep '^satisfaction:' <<<"$result" | awk '{print $2}')
     steps=$(grep '^steps to reach:' <<<"$result" | awk '{print $4}')
     t=$(echo "$end - $start" | bc)
-    printf 'point %s seed %s: satisfaction %s, steps to reach %s, %.1f s\n' "$task" "$seed" "$sat" "$steps" "$t"
-    sats+=("$sat") secs+=("$t")
+    sampled=$("$bin" eval --ckpt "$dir" --sampled-plans | grep '^satisfaction:' | awk '{print $2}')
+    printf 'point %s seed %s: satisfaction %s (sampled plans %s), steps to reach %s, %.1f s\n' \
+      "$task" "$seed" "$sat" "$sampled" "$steps" "$t"
+    sats+=("$sat") secs+=("$t") samples+=("$sampled")
     [[ "$steps" != "-" && -n "$steps" ]] && reach+=("$steps")
   done
-  printf 'point %s over seeds %s: satisfaction %s, steps to reach %s, wall time %s s\n' "$task" "${seeds[*]}" \
+  printf 'point %s over seeds %s: satisfaction %s (sampled plans %s), steps to reach %s, wall time %s s\n' \
+    "$task" "${seeds[*]}" \
     "$(printf '%s\n' "${sats[@]}" | summary)" \
+    "$(printf '%s\n' "${samples[@]}" | summary)" \
     "$( ((${#reach[@]})) && printf '%s\n' "${reach[@]}" | summary || echo -)" \
     "$(printf '%s\n' "${secs[@]}" | summary)"
 done

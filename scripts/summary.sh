@@ -1,4 +1,15 @@
-# Shared by the results scripts: `summary` prints the mean ± sample std of the numbers
+# Shared by the results scripts. `schrl_bin` sets `bin` to $SCHRL_BIN, or builds
+# target/release/schrl and uses it (SCHRL_BIN: a copy that stays put while the tree
+# changes).
+schrl_bin() {
+  bin=${SCHRL_BIN:-}
+  if [[ -z "$bin" ]]; then
+    cargo build --release -q -p schrl-cli
+    bin=./target/release/schrl
+  fi
+}
+
+# `summary` prints the mean ± sample std of the numbers
 # on stdin (one per line), or "-" when there are none.
 summary() {
   awk '{ s += $1; q += $1 * $1; n++ } END {

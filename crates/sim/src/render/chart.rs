@@ -96,6 +96,7 @@ where
         let (y0, y1) = panel.y_range.unwrap_or_else(|| extent(pts().map(|p| p.1)));
         let pad = 0.05 * (y1 - y0);
         let mut chart = ChartBuilder::on(&plot)
+            .margin_left(12)
             .margin_right(20)
             .margin_bottom(6)
             .x_label_area_size(44)
@@ -176,6 +177,7 @@ where
             .fold(0.0f64, f64::max);
         let (y0, y1) = panel.y_range.unwrap_or((0.0, if tallest > 0.0 { 1.1 * tallest } else { 1.0 }));
         let mut chart = ChartBuilder::on(&area)
+            .margin_left(12)
             .margin_right(20)
             .margin_top(8)
             .x_label_area_size(30)

@@ -94,7 +94,7 @@ pub(crate) fn axes<'a, 'b, DB: DrawingBackend>(
         .y_label_formatter(&tick)
         .label_style(text(13))
         .axis_desc_style(text(14))
-        .light_line_style(GRID.mix(0.5))
+        .light_line_style(TRANSPARENT)
         .bold_line_style(GRID);
     mesh
 }
