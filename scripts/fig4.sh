@@ -37,8 +37,8 @@ for task in "${tasks[@]}"; do
     row "$csv" "$task" "(c) gradient planner" "$seed" \
       "$("$bin" eval --ckpt "$run" --planner gradient "${gradient_eval[@]}")"
     row "$csv" "$task" "(d) frozen planner" "$seed" "$("$bin" eval --ckpt "$frozen_run")"
-    row "$sampled" "$task" "(a) SCHRL, sampled plans" "$seed" "$("$bin" eval --ckpt "$run" --sampled-plans)"
-    row "$sampled" "$task" "(d) frozen planner, sampled plans" "$seed" \
+    row "$sampled" "$task" "(a) SCHRL (sampled plans)" "$seed" "$("$bin" eval --ckpt "$run" --sampled-plans)"
+    row "$sampled" "$task" "(d) frozen planner (sampled plans)" "$seed" \
       "$("$bin" eval --ckpt "$frozen_run" --sampled-plans)"
   done
 done

@@ -223,7 +223,7 @@ const DEFAULT_TARGET: f64 = 0.97;
 /// Iterations between checkpoints when `--save-every` is not given.
 const DEFAULT_SAVE_EVERY: usize = 50;
 /// The planner's extra clearance when `--safe-margin` is not given: one Point radius
-/// (README, *Joint training results*).
+/// (README, *Joint training (Algorithm 1) and results*).
 const DEFAULT_SAFE_MARGIN: f64 = 0.1;
 
 fn check_settings(s: &JointRunSettings) -> Result<()> {
