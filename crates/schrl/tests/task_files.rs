@@ -75,6 +75,11 @@ radius = 0.5
 fn a_users_task_loads() {
     let t = load(GOOD, "F[1,2] home & G[1,2] safe").unwrap();
     assert_eq!((t.name.as_str(), t.steps), ("mine", 2));
+    assert!(t.warnings().is_empty());
+    // A goal the spec never names is legal, and warned about.
+    let two = format!("{GOOD}\n[[goal]]\nname = \"shop\"\ncenter = [-2.0, 2.0]\nradius = 0.5\n");
+    let t = load(&two, "F[1,2] home & G[1,2] safe").unwrap();
+    assert_eq!(t.warnings(), vec!["goal 'shop' is never named by the spec, so no plan is asked to visit it"]);
 }
 
 #[test]
@@ -100,6 +105,28 @@ fn malformed_tasks_name_the_file_and_the_problem() {
             "F[1,2] home",
             "steps_to_reach_at: 3 is not a waypoint count in 1..=2",
         ),
+        // Issue 19: what a new user tried. A constant spec panicked in `train`;
+        // `steps = 1000000` passed the check and `train` aborted allocating 16 GB.
+        (GOOD.to_string(), "true", "the spec names no goal, safe or counter"),
+        (GOOD.to_string(), "false | !true", "the constant"),
+        (GOOD.replace("steps = 2", "steps = 1000000"), "F[1,2] home", "steps: 1000000 waypoints"),
+        (GOOD.replace("center = [2.0, 2.0]", "center = [9.0, 2.0]"), "F[1,2] home", "center lies outside"),
+        (
+            GOOD.replace("center = [2.0, 2.0]", "center = [0.0, 0.0]"),
+            "F[1,2] home",
+            "center lies inside an obstacle of the walls map",
+        ),
+        (
+            GOOD.replace("high = [2.0, -1.0]", "high = [8.0, -1.0]"),
+            "F[1,2] home",
+            "start: the box lies outside",
+        ),
+        (
+            GOOD.replace("low = [1.0, -2.0]", "low = [0.0, -2.0]"),
+            "F[1,2] home",
+            "start: the box reaches into an obstacle",
+        ),
+        (GOOD.replace("safe_radius = 0.1", "safe_radius = 50"), "F[1,2] home", "safe_radius: 50 m is more"),
     ];
     for (toml_text, spec, expected) in cases {
         let err = load(&toml_text, spec).err().unwrap_or_else(|| panic!("accepted: {spec}")).to_string();

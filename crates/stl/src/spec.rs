@@ -275,7 +275,7 @@ impl Spec {
 
     /// A reusable evaluator (allocation-free once warm).
     pub fn evaluator(&self) -> Evaluator<'_> {
-        Evaluator { spec: self, ws: Workspace::new(), values: Vec::new(), dvalues: Vec::new() }
+        Evaluator { spec: self, ws: Workspace::new(), values: Vec::new(), dvalues: Vec::new(), steps: 0 }
     }
 
     /// Robustness at step 0.
@@ -402,6 +402,9 @@ pub struct Evaluator<'s> {
     ws: Workspace,
     values: Vec<f64>,
     dvalues: Vec<f64>,
+    /// Steps of the path last evaluated (0: none yet). Kept apart from `values`,
+    /// which is empty for a spec without predicates (`true`, `false`).
+    steps: usize,
 }
 
 impl Evaluator<'_> {
@@ -426,6 +429,7 @@ impl Evaluator<'_> {
             self.values.extend(preds.iter().map(|p| p.value_on_path(path, dim, t)));
         }
         self.spec.program.forward(&self.values, n, sem, &mut self.ws);
+        self.steps = n;
         Ok(n)
     }
 
@@ -475,8 +479,7 @@ impl Evaluator<'_> {
     /// map-clearance predicates those are the expensive part).
     pub fn reevaluate(&mut self, t: usize, sem: &Semantics) -> Result<f64, EvalError> {
         sem.validate()?;
-        let np = self.spec.predicates.len().max(1);
-        let n = self.values.len() / np;
+        let n = self.steps;
         if n == 0 {
             return Err(EvalError::Empty);
         }

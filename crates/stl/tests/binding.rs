@@ -146,3 +146,23 @@ fn until_a_counter_passes_the_gradient_of_a_badly_violated_left_side() {
     assert_eq!(rho, -5.0);
     assert!(grad.iter().any(|g| *g != 0.0), "x gets a gradient: {grad:?}");
 }
+
+#[test]
+fn constant_specs_evaluate_in_batches_under_two_semantics() {
+    // `schrl train` on a task whose spec was only `true` panicked here: re-evaluating
+    // under a second semantics read the step count from the predicate values, of
+    // which a spec without predicates has none.
+    for (text, sign) in [("true", 1.0), ("false", -1.0)] {
+        let spec = Spec::builder(parse(text).unwrap()).signals(["x", "y"]).build().unwrap();
+        let paths = vec![0.5; 2 * 3 * 2];
+        let mut grads = vec![0.0; paths.len()];
+        let (rho, hard) = spec
+            .gradient_batch_and_robustness(&paths, 3, &Semantics::soft(10.0), &mut grads, &Semantics::hard())
+            .unwrap();
+        assert_eq!(rho.len(), 2);
+        assert!(rho.iter().chain(&hard).all(|r| r * sign > 0.0), "{text}: {rho:?} {hard:?}");
+        assert!(grads.iter().all(|g| *g == 0.0));
+    }
+    let spec = Spec::builder(parse("true").unwrap()).signals(["x"]).build().unwrap();
+    assert_eq!(spec.evaluator().reevaluate(0, &Semantics::hard()), Err(EvalError::Empty));
+}

@@ -32,6 +32,9 @@ pub fn run(cmd: Command) -> Result<()> {
                 t.step_limit
             );
             println!("spec: {}", t.formula);
+            for w in t.warnings() {
+                println!("warning: {w}");
+            }
             println!("ok");
             Ok(())
         }

@@ -363,6 +363,9 @@ pub fn train(args: TrainArgs) -> Result<()> {
         (run, settings, saved)
     } else {
         let settings = args.settings()?;
+        for w in settings.task()?.warnings() {
+            eprintln!("warning: {w}");
+        }
         let run = RunWriter::create(&out, RunKind::Joint, &settings, args.run.existing())
             .map_err(super::store_error)?;
         (run, settings, None)

@@ -287,6 +287,12 @@ impl Task {
         if t.steps == 0 {
             return Err(bad("steps: must be at least 1".into()));
         }
+        if t.steps > MAX_PLAN_STEPS {
+            return Err(bad(format!(
+                "steps: {} waypoints is more than a plan can have here (at most {MAX_PLAN_STEPS})",
+                t.steps
+            )));
+        }
         if t.step_limit == 0 {
             return Err(bad("step_limit: must be at least 1".into()));
         }
@@ -303,6 +309,26 @@ impl Task {
         }
         if t.start.low.iter().zip(&t.start.high).any(|(l, h)| !(l <= h && l.is_finite() && h.is_finite())) {
             return Err(bad("start: every low must be finite and at most its high".into()));
+        }
+        let (lo, hi) = map.region();
+        let region = format!("{lo:?} to {hi:?}");
+        let inside = |p: &[f64]| p.iter().zip(lo.iter().zip(&hi)).all(|(x, (l, h))| l <= x && x <= h);
+        if !inside(&t.start.low) || !inside(&t.start.high) {
+            return Err(bad(format!("start: the box lies outside the {} map's region ({region})", t.map)));
+        }
+        if let Some(p) = grid(&t.start.low, &t.start.high, 5).find(|p| map.sdf(p) <= 0.0) {
+            return Err(bad(format!(
+                "start: the box reaches into an obstacle of the {} map (at {p:?})",
+                t.map
+            )));
+        }
+        if let Some(best) = largest_clearance(&map)
+            && t.safe_radius >= best
+        {
+            return Err(bad(format!(
+                "safe_radius: {} m is more clearance than any point of the {} map has ({best:.2} m at most)",
+                t.safe_radius, t.map
+            )));
         }
         if t.goal.is_empty() {
             return Err(bad("goal: at least one [[goal]] is needed".into()));
@@ -323,6 +349,12 @@ impl Task {
             if !(g.radius > 0.0 && g.radius.is_finite()) {
                 return Err(bad(format!("{at}: radius must be positive")));
             }
+            if !inside(&g.center) {
+                return Err(bad(format!("{at}: center lies outside the {} map's region ({region})", t.map)));
+            }
+            if map.sdf(&g.center) <= 0.0 {
+                return Err(bad(format!("{at}: center lies inside an obstacle of the {} map", t.map)));
+            }
         }
         if let Some(c) = t.counter_from
             && c > t.steps
@@ -331,6 +363,13 @@ impl Task {
         }
         let spec_err = |message: String| TaskError { path: spec_path.to_path_buf(), message };
         let formula = stl::parse(spec_text).map_err(|e| spec_err(e.render(spec_text)))?;
+        if formula.names().is_empty() {
+            return Err(spec_err(format!(
+                "the spec names no goal, safe or counter, so it is the constant '{formula}': every plan \
+                 would satisfy it, or none; name the task's goals ({})",
+                t.goal.iter().map(|g| g.name.as_str()).collect::<Vec<_>>().join(", ")
+            )));
+        }
         for name in formula.names() {
             let known = t.goal.iter().any(|g| g.name == name)
                 || name == "safe"
@@ -374,6 +413,16 @@ impl Task {
             steps_to_reach_at: t.steps_to_reach_at,
             toml: toml_text.to_string(),
         })
+    }
+
+    /// What is legal but probably not meant: goals the spec never names.
+    pub fn warnings(&self) -> Vec<String> {
+        let names = self.formula.names();
+        self.goals
+            .iter()
+            .filter(|g| !names.iter().any(|n| *n == g.name))
+            .map(|g| format!("goal '{}' is never named by the spec, so no plan is asked to visit it", g.name))
+            .collect()
     }
 
     /// The task with every goal disc shrunk by `margin`, at most a third of its
@@ -570,4 +619,32 @@ fn toml_message(e: &toml::de::Error, text: &str) -> String {
         }
         None => e.message().to_string(),
     }
+}
+
+/// The most waypoints a task's plan may have: far above every shipped task (20), far
+/// below what makes allocating a batch of plans fail (`steps = 1000000` once asked for
+/// 16 GB).
+pub const MAX_PLAN_STEPS: usize = 1000;
+
+/// `n` points per dimension spread over the box `lo..hi`, corners included.
+fn grid<'a>(lo: &'a [f64], hi: &'a [f64], n: usize) -> impl Iterator<Item = Vec<f64>> + 'a {
+    let dim = lo.len();
+    (0..n.pow(dim as u32)).map(move |mut k| {
+        (0..dim)
+            .map(|d| {
+                let i = k % n;
+                k /= n;
+                lo[d] + (hi[d] - lo[d]) * i as f64 / (n - 1).max(1) as f64
+            })
+            .collect()
+    })
+}
+
+/// The largest obstacle clearance over a grid of `map`'s region (`None`: unbounded,
+/// as on the empty map).
+fn largest_clearance(map: &Map) -> Option<f64> {
+    let (lo, hi) = map.region();
+    let n = if lo.len() == 2 { 71 } else { 21 };
+    let best = grid(&lo, &hi, n).map(|p| map.sdf(&p)).fold(f64::NEG_INFINITY, f64::max);
+    best.is_finite().then_some(best)
 }
