@@ -205,6 +205,74 @@ fn joint_train_resume_and_eval_end_to_end() {
         "{}",
         stderr(&o)
     );
+    // A task file decides its robot; every run can be written out and judged again.
+    let keys = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/tasks/keys.toml");
+    let o = schrl(&["train", "--robot", "car", "--task", keys, "--out", dir.join("k").to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("is for the point"), "{}", stderr(&o));
+    let krun = dir.join("keys");
+    let o = schrl(&[
+        "train",
+        "--task",
+        keys,
+        "--steps",
+        "2000",
+        "--pretrain-updates",
+        "2",
+        "--planner",
+        "mlp",
+        "--eval-groups",
+        "0",
+        "--controller",
+        ctl.to_str().unwrap(),
+        "--out",
+        krun.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let jsonl = dir.join("runs.jsonl");
+    let eval_keys = |extra: &[&str]| {
+        let base = ["eval", "--ckpt", krun.to_str().unwrap(), "--groups", "2", "--per-group", "3"];
+        schrl(&[&base[..], &["--trajectories", jsonl.to_str().unwrap()], extra].concat())
+    };
+    // A picture that cannot be written fails before the evaluation, leaving nothing.
+    let o = eval_keys(&["--out", "/nonexistent/x.png"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("/nonexistent") && !stdout(&o).contains("satisfaction")
+    );
+    assert!(!jsonl.exists());
+    let o = eval_keys(&[]);
+    assert!(o.status.success() && stdout(&o).contains("wrote 6 runs"), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&jsonl).unwrap();
+    assert_eq!(text.lines().count(), 6);
+    for line in text.lines() {
+        let r: serde_json::Value = serde_json::from_str(line).unwrap();
+        assert!(r["satisfied"].is_boolean() && r["outcome"].is_string(), "{line}");
+        let positions = r["positions"].as_array().unwrap();
+        assert_eq!(
+            positions.len(),
+            r["steps"].as_u64().unwrap() as usize + 1,
+            "a position per step and the start"
+        );
+        assert!(positions.iter().all(|p| p.as_array().unwrap().len() == 2));
+        assert_eq!(r["waypoints"].as_array().unwrap().len(), 7, "the start and 6 waypoints");
+        assert!(r["reached_at"].as_array().unwrap().len() <= 6);
+    }
+    // Kept without --force.
+    let o = eval_keys(&[]);
+    assert!(!o.status.success() && stderr(&o).contains("--force"), "{}", stderr(&o));
+    let rejudge = || schrl(&["robustness", "--task", keys, "--runs", jsonl.to_str().unwrap()]);
+    let o = rejudge();
+    assert!(
+        o.status.success() && stdout(&o).contains("6 runs") && stdout(&o).contains("0 differ"),
+        "{}",
+        stderr(&o)
+    );
+    // A record that claims what its positions do not show is caught.
+    let first = text.lines().next().unwrap();
+    let mut r: serde_json::Value = serde_json::from_str(first).unwrap();
+    r["satisfied"] = serde_json::Value::Bool(!r["satisfied"].as_bool().unwrap());
+    std::fs::write(&jsonl, text.replacen(first, &r.to_string(), 1)).unwrap();
+    let o = rejudge();
+    assert!(!o.status.success() && stderr(&o).contains("1 of 6 runs judged differently"), "{}", stderr(&o));
     // Fig. 5: the two planners' waypoints in one picture.
     let fig5 = dir.join("fig5.svg");
     let o = schrl(&["plan", "compare", "--ckpt", run_s, "--n", "2", "--out", fig5.to_str().unwrap()]);

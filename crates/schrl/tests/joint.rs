@@ -4,8 +4,9 @@
 use schrl::control::{ControlConfig, ControlTrainer, PpoConfig};
 use schrl::plan::cpg::CpgConfig;
 use schrl::run::evaluate::mean_std;
-use schrl::run::execute::{Dispatch, Execution, Outcome, WaypointDispatcher, executed_robustness};
+use schrl::run::execute::{Dispatch, Execution, Outcome, WaypointDispatcher};
 use schrl::run::joint::{JointConfig, JointTrainer};
+use schrl::task::along::ExecutionSpec;
 use schrl::task::{Task, TaskKind};
 use sim::{Robot, Step};
 
@@ -59,28 +60,35 @@ fn through_goals(task: &Task) -> Vec<Vec<f64>> {
     path
 }
 
+/// Robustness of an executed path (no trajectory: only the reached positions known).
+fn executed_robustness(spec: &ExecutionSpec, executed: &[Vec<f64>]) -> f64 {
+    let reached_at: Vec<usize> = (1..executed.len()).map(|k| 10 * k).collect();
+    spec.judge(executed, &[], &reached_at).robustness
+}
+
 #[test]
 fn satisfaction_is_judged_on_the_executed_path() {
     let task = Task::point(TaskKind::Seq);
-    let spec = task.spec();
+    let spec = task.execution_spec();
     let good = through_goals(&task);
-    assert!(executed_robustness(&spec, &good, task.steps) > 0.0);
+    assert!(executed_robustness(&spec, &good) > 0.0);
     // The same goals in the wrong order: violated.
     let mut swapped = good.clone();
     swapped.swap(1, 3);
     swapped.swap(2, 4);
-    assert!(executed_robustness(&spec, &swapped, task.steps) < 0.0);
+    assert!(executed_robustness(&spec, &swapped) < 0.0);
     // A run that stopped early cannot satisfy, whatever it visited.
-    assert_eq!(executed_robustness(&spec, &good[..5], task.steps), f64::NEG_INFINITY);
+    assert_eq!(executed_robustness(&spec, &good[..5]), f64::NEG_INFINITY);
     let run = |outcome, executed: Vec<Vec<f64>>| Execution {
         planned: good.clone(),
-        robustness: executed_robustness(&spec, &executed, task.steps),
+        robustness: executed_robustness(&spec, &executed),
         executed,
         trajectory: vec![],
         outcome,
         steps: 100,
         reached_at: (1..=8).map(|k| 10 * k).collect(),
         control_return: 0.0,
+        entered: None,
     };
     assert!(run(Outcome::Completed, good.clone()).satisfied());
     // Steps to reach: to the last waypoint, or to a task's count (Loop: the tenth).
@@ -170,8 +178,9 @@ fn reached_positions_that_cut_a_wall_corner_do_not_fail_a_collision_free_run() {
     );
     executed.extend([[1.1, -2.0], [1.0, -1.9]].map(Vec::from));
     // (-0.55, 1.85) -> (-1.65, -0.7) clips the wall centred at (-1, 0).
-    assert!(executed_robustness(&task.spec(), &executed, task.steps) < 0.0);
-    assert!(executed_robustness(&task.execution_spec(), &executed, task.steps) > 0.0);
+    let flat: Vec<f64> = executed.concat();
+    assert!(task.spec().robustness(&flat, &stl::Semantics::hard()).unwrap() < 0.0);
+    assert!(executed_robustness(&task.execution_spec(), &executed) > 0.0);
 }
 
 #[test]
@@ -197,17 +206,18 @@ fn leave_one_out_cancels_what_runs_of_one_start_share() {
 fn execution_reward_ranks_faster_runs_higher_and_every_failure_below_every_success() {
     use schrl::run::joint::execution_reward;
     let task = Task::point(TaskKind::Seq);
-    let spec = task.spec();
+    let spec = task.execution_spec();
     let good = through_goals(&task);
     let run = |outcome, steps: usize, reached: usize| Execution {
         planned: good.clone(),
-        robustness: executed_robustness(&spec, &good[..=reached], task.steps),
+        robustness: executed_robustness(&spec, &good[..=reached]),
         executed: good[..=reached].to_vec(),
         trajectory: vec![],
         outcome,
         steps,
         reached_at: (1..=reached).map(|k| 10 * k).collect(),
         control_return: 0.0,
+        entered: None,
     };
     let fast = execution_reward(&run(Outcome::Completed, 400, 8), &task);
     let slow = execution_reward(&run(Outcome::Completed, task.step_limit, 8), &task);

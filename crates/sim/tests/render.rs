@@ -18,7 +18,8 @@ fn scene(map: &str) -> Scene {
     let dim = map.dim();
     let mut s = Scene::new(map);
     let p = |x: f64, y: f64| if dim == 3 { vec![x, y, 1.0] } else { vec![x, y] };
-    s.goals.push(Goal { center: p(2.0, 2.0), radius: 0.5 });
+    s.goals.push(Goal { center: p(2.0, 2.0), radius: 0.5, avoid: false });
+    s.goals.push(Goal { center: p(-2.0, 2.0), radius: 0.4, avoid: true });
     s.paths.push(Polyline { points: vec![p(1.5, -1.5), p(2.0, 0.5), p(2.0, 2.0)], kind: PathKind::Planned });
     s.paths.push(Polyline { points: vec![p(1.5, -1.5), p(1.9, 0.4), p(2.1, 1.9)], kind: PathKind::Executed });
     s.robots.push(RobotMarker { position: p(1.5, -1.5), heading: 1.0, radius: 0.1 });
@@ -128,8 +129,14 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
     let svg = tmp("scene.svg");
     save(&scene("walls"), &svg, false).unwrap();
     let text = std::fs::read_to_string(&svg).unwrap();
-    for want in ["x (m)", "y (m)", "walls", "goals", "planned waypoints", "executed trajectory"] {
+    for want in
+        ["x (m)", "y (m)", "walls", "goals", "regions to avoid", "planned waypoints", "executed trajectory"]
+    {
         assert!(text.contains(want), "{want} missing from the scene's SVG");
+    }
+    // Goals green, regions to avoid red.
+    for colour in ["#28AA50", "#D71E28"] {
+        assert!(text.to_uppercase().contains(colour), "{colour} missing from the scene's SVG");
     }
     let svg = tmp("duck.svg");
     save(&scene("duck"), &svg, false).unwrap();

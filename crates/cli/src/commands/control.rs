@@ -272,7 +272,7 @@ fn eval(args: EvalArgs) -> Result<()> {
 fn draw_episodes(runs: &[GoalEpisode], map: &Map, out: &Path, force: bool) -> Result<()> {
     let mut scene = Scene::new(map.clone());
     for r in runs.iter().take(6) {
-        scene.goals.push(Goal { center: r.goal.clone(), radius: r.reach_radius });
+        scene.goals.push(Goal { center: r.goal.clone(), radius: r.reach_radius, avoid: false });
         let end = r.episode.trajectory.last().cloned().unwrap_or_default();
         scene.robots.push(RobotMarker { position: end, heading: r.heading, radius: r.radius });
         scene.paths.push(Polyline { points: r.episode.trajectory.clone(), kind: PathKind::Executed });

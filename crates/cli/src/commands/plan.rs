@@ -15,7 +15,7 @@ use schrl::run::evaluate::mean_std;
 use schrl::store::planner::PlanRunSettings;
 use schrl::store::{self, MetricsLog, RunKind, RunWriter};
 use schrl::task::{SafeAlong, Task, TaskKind};
-use sim::render::{Goal, PathKind, Polyline, Scene};
+use sim::render::{PathKind, Polyline, Scene};
 use stl::Semantics;
 
 /// Subcommands of `schrl plan`.
@@ -327,8 +327,7 @@ fn sample(args: SampleArgs) -> Result<()> {
     let satisfied = rho.iter().filter(|r| **r > 0.0).count();
     if let Some(out) = &args.out {
         let mut scene = Scene::new(task.map.clone());
-        scene.goals =
-            task.goals.iter().map(|g| Goal { center: g.center.clone(), radius: g.radius }).collect();
+        scene.goals = task.picture_goals();
         let paths: Vec<Vec<Vec<f32>>> = paths.to_vec3()?;
         for p in paths.iter().take(20) {
             let points = p.iter().map(|w| w.iter().map(|&x| x as f64).collect()).collect();
@@ -405,8 +404,7 @@ fn compare(args: CompareArgs) -> Result<()> {
     let network: Vec<Vec<Vec<f32>>> = run.plan.planner().mean_path(&g0, task.steps)?.to_vec3()?;
     let starts: Vec<Vec<f64>> = g0.to_dtype(candle_core::DType::F64)?.to_vec2()?;
     let mut scene = Scene::new(run.task.map.clone());
-    scene.goals =
-        run.task.goals.iter().map(|g| Goal { center: g.center.clone(), radius: g.radius }).collect();
+    scene.goals = run.task.picture_goals();
     scene.labels.planned = "SCHRL planner (jointly trained)".into();
     scene.labels.compared = "gradient planner".into();
     let dim = task.map.dim();

@@ -3,6 +3,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
+use schrl::run::evaluate::RunRecord;
+use schrl::run::execute::{Execution, Outcome};
 use stl::{Semantics, Spec};
 
 use super::spec_text::SpecText;
@@ -11,11 +13,22 @@ use super::spec_text::SpecText;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The spec: formula text, or @FILE to read it from a file.
-    #[arg(long)]
-    spec: String,
+    #[arg(long, required_unless_present = "task", conflicts_with = "task")]
+    spec: Option<String>,
     /// CSV trace: a header row naming the signals, then one row of numbers per step.
-    #[arg(long)]
-    trace: PathBuf,
+    #[arg(long, required_unless_present = "runs", conflicts_with = "runs")]
+    trace: Option<PathBuf>,
+    /// Judge recorded runs against this task instead (a task file, or a built-in name
+    /// with --robot): its goals, `safe` and regions to avoid, as `schrl eval` judges.
+    #[arg(long, requires = "runs")]
+    task: Option<String>,
+    /// Robot of a built-in --task [default: point].
+    #[arg(long, requires = "task")]
+    robot: Option<sim::Robot>,
+    /// Runs written by `schrl eval --trajectories` (JSON lines) to judge again: prints
+    /// each run's robustness and verdict, and fails if any differs from the record.
+    #[arg(long, requires = "task")]
+    runs: Option<PathBuf>,
     /// Semantics: hard, soft:<alpha> (the paper's softmax-weighted mean) or
     /// lse:<temperature> (log-sum-exp).
     #[arg(long, default_value = "hard")]
@@ -92,9 +105,15 @@ pub fn read_trace(path: &std::path::Path) -> Result<Trace> {
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
-    let text = SpecText::load(&args.spec)?;
+    if let (Some(task), Some(runs)) = (&args.task, &args.runs) {
+        return rejudge(&super::task::resolve(args.robot, task)?, runs);
+    }
+    let (Some(spec), Some(trace)) = (&args.spec, &args.trace) else {
+        bail!("--spec and --trace are needed (or --task with --runs)");
+    };
+    let text = SpecText::load(spec)?;
     let formula = text.parse()?;
-    let trace = read_trace(&args.trace)?;
+    let trace = read_trace(trace)?;
     let spec = Spec::builder(formula).signals(trace.names.clone()).build().map_err(|e| text.explain(e))?;
     let mut sem = args.semantics;
     if args.smooth_logic_only {
@@ -122,4 +141,63 @@ fn write_gradient(path: &std::path::Path, names: &[String], grad: &[f64]) -> Res
     }
     w.flush()?;
     Ok(())
+}
+
+/// Judges every run recorded in `path` again under `task` and compares verdicts.
+fn rejudge(task: &schrl::task::Task, path: &std::path::Path) -> Result<()> {
+    use std::io::BufRead;
+    let shown = path.display();
+    let spec = task.execution_spec();
+    let file = std::fs::File::open(path).with_context(|| format!("cannot read runs {shown}"))?;
+    let (mut runs, mut satisfied, mut differ) = (0usize, 0usize, 0usize);
+    println!("group,index,robustness,verdict");
+    for (i, line) in std::io::BufReader::new(file).lines().enumerate() {
+        let line = line.with_context(|| format!("{shown}: line {}", i + 1))?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let r: RunRecord = serde_json::from_str(&line).with_context(|| {
+            format!("{shown}: line {}: not a run written by `schrl eval --trajectories`", i + 1)
+        })?;
+        if r.reached.iter().chain(&r.positions).chain(&r.waypoints).any(|p| p.len() != task.map.dim()) {
+            bail!("{shown}: line {}: positions are not {}-D, as the task's map is", i + 1, task.map.dim());
+        }
+        let verdict = Execution {
+            planned: r.waypoints.clone(),
+            executed: r.reached.clone(),
+            trajectory: vec![],
+            outcome: recorded_outcome(&r, task.steps),
+            steps: r.steps,
+            reached_at: r.reached_at.clone(),
+            control_return: 0.0,
+            robustness: 0.0,
+            entered: None,
+        };
+        let judged = spec.judge(&r.reached, &r.positions, &r.reached_at);
+        let run = Execution { robustness: judged.robustness, entered: judged.entered, ..verdict };
+        let (rho, says) = (run.robustness, run.verdict());
+        println!("{},{},{rho},{says}", r.group, r.index);
+        runs += 1;
+        satisfied += usize::from(run.satisfied());
+        if run.satisfied() != r.satisfied || says != r.outcome {
+            differ += 1;
+            eprintln!("{shown}: line {}: recorded '{}', judged '{says}'", i + 1, r.outcome);
+        }
+    }
+    println!("{runs} runs, {satisfied} satisfy the task, {differ} differ from the record");
+    if differ > 0 {
+        bail!("{differ} of {runs} runs judged differently from {shown}");
+    }
+    Ok(())
+}
+
+/// How a recorded run ended: completed when every waypoint was reached; otherwise
+/// what the simulator said (collisions and falls are not visible in positions).
+fn recorded_outcome(r: &RunRecord, steps: usize) -> Outcome {
+    match r.outcome.as_str() {
+        _ if r.reached.len() == steps + 1 => Outcome::Completed,
+        "collided" => Outcome::Collided,
+        "fell" => Outcome::Fell,
+        _ => Outcome::TimedOut,
+    }
 }

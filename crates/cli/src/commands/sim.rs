@@ -58,7 +58,7 @@ fn render(args: RenderArgs) -> Result<()> {
     let mut env = make_env(args.robot, map.clone())?;
     env.reset(args.seed, None)?;
     let mut scene = Scene::new(map);
-    scene.goals.push(Goal { center: env.goal().to_vec(), radius: env.reach_radius() });
+    scene.goals.push(Goal { center: env.goal().to_vec(), radius: env.reach_radius(), avoid: false });
     let mut trail = vec![env.position().to_vec()];
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed ^ 0x5EED);
     let dim = env.action_space().dim();

@@ -10,14 +10,15 @@ use schrl::plan::cpg::{CpgConfig, Method};
 use schrl::plan::gradient_planner::GradientPlannerConfig;
 use schrl::plan::planner::PlannerKind;
 use schrl::plan::pretrain::{PretrainConfig, pretrain};
+use schrl::run::RunError;
 use schrl::run::evaluate::{
-    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task, mean_std,
+    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task, evaluate_task_with, mean_std,
 };
 use schrl::run::joint::{JointConfig, JointMetrics, JointRunSettings, JointTrainer};
-use schrl::store::{self, Existing, MetricsLog, RunKind, RunWriter};
-use schrl::task::{Task, TaskKind};
+use schrl::store::{self, Existing, JsonLines, MetricsLog, RunKind, RunWriter};
+use schrl::task::Task;
 use sim::Robot;
-use sim::render::{ChartPanel, Goal, PathKind, Polyline, Scene, Series};
+use sim::render::{ChartPanel, PathKind, Polyline, Scene, Series};
 use stl::Semantics;
 
 /// Arguments of `schrl train`. Flags left out take the default shown; with
@@ -25,7 +26,8 @@ use stl::Semantics;
 /// refused (`--steps`, `--target`, `--eval-groups` and `--save-every` may change).
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
-    /// Robot: point, car, drone, or doggo (needs the `mujoco` feature) [default: point].
+    /// Robot of a built-in task: point, car, drone, or doggo (needs the `mujoco`
+    /// feature) [default: point; a task file names its own].
     #[arg(long)]
     robot: Option<Robot>,
     /// Task: seq, cover, branch, loop, signal, or a task file (TOML). Required for a new run.
@@ -113,9 +115,9 @@ pub struct TrainArgs {
 impl TrainArgs {
     /// The settings of a new run: the flags given, defaults for the rest.
     fn settings(&self) -> Result<JointRunSettings> {
-        let robot = self.robot.unwrap_or(Robot::Point);
         let Some(task_arg) = &self.task else { bail!("--task is required for a new run") };
-        let task = load_task(robot, task_arg)?;
+        let task = super::task::resolve(self.robot, task_arg)?;
+        let robot = task.robot;
         let goal_margin = match self.goal_margin {
             Some(m) => m,
             None => sim::make_env(robot, task.map.clone())?.reach_radius(),
@@ -173,7 +175,9 @@ impl TrainArgs {
         let task_differs = match &self.task {
             None => false,
             Some(t) => {
-                let task = load_task(self.robot.unwrap_or(saved.robot), t)?;
+                // A built-in name means the saved robot's task; a file names its own.
+                let robot = self.robot.or((!t.ends_with(".toml")).then_some(saved.robot));
+                let task = super::task::resolve(robot, t)?;
                 task.toml != saved.task_toml || task.spec != saved.task_spec
             }
         };
@@ -279,7 +283,12 @@ pub struct EvalArgs {
     /// Picture of executed runs with their planned waypoints (PNG or SVG).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Replace the picture.
+    /// Write every run to this file, one JSON object per line: `satisfied`,
+    /// `outcome`, `robustness`, `steps`, `steps_to_reach`, `waypoints` (the plan),
+    /// `reached`, `reached_at` and `positions` (the robot's position at every step).
+    #[arg(long, value_name = "FILE.jsonl")]
+    trajectories: Option<PathBuf>,
+    /// Replace the picture and the trajectories file.
     #[arg(long)]
     force: bool,
     /// Execute paths sampled from the planner instead of its mean paths (the
@@ -303,19 +312,6 @@ enum PlannerChoice {
     Network,
     /// The gradient planner baseline.
     Gradient,
-}
-
-fn load_task(robot: Robot, task: &str) -> Result<Task> {
-    let t = if task.ends_with(".toml") {
-        Task::from_file(Path::new(task))?
-    } else {
-        let kind: TaskKind = task.parse().map_err(anyhow::Error::msg)?;
-        Task::builtin(robot.name(), kind)?
-    };
-    if t.robot != robot {
-        bail!("task '{}' is for the {}, not the {robot}", t.name, t.robot);
-    }
-    Ok(t)
 }
 
 fn bar(len: u64, what: &str) -> Result<ProgressBar> {
@@ -528,12 +524,15 @@ fn print_eval(e: &TaskEval) {
         let (tm, ts) = mean_std(&e.steps_to_reach);
         println!("steps to reach: {tm:.1} ± {ts:.1}");
     }
-    println!("failures: {} collisions, {} falls, {} time-outs", e.collisions, e.falls, e.timeouts);
+    println!(
+        "failures: {} collisions, {} falls, {} time-outs, {} entered a region to avoid",
+        e.collisions, e.falls, e.timeouts, e.entered
+    );
 }
 
 fn draw(task: &Task, e: &TaskEval, out: &Path, force: bool) -> Result<()> {
     let mut scene = Scene::new(task.map.clone());
-    scene.goals = task.goals.iter().map(|g| Goal { center: g.center.clone(), radius: g.radius }).collect();
+    scene.goals = task.picture_goals();
     for run in e.examples.iter().take(4) {
         scene.paths.push(Polyline { points: run.planned.clone(), kind: PathKind::Planned });
         scene.paths.push(Polyline { points: run.trajectory.clone(), kind: PathKind::Executed });
@@ -573,11 +572,33 @@ pub fn eval(args: EvalArgs) -> Result<()> {
             c.controller()
         }
     };
-    let e = evaluate_task(&t.task, plans, &controller, (args.groups, args.per_group), args.seed)?;
+    // Outputs are checked before the evaluation, which can take minutes.
+    if let Some(out) = &args.out {
+        sim::render::check_target(out, args.force)?;
+    }
+    let mut records = match &args.trajectories {
+        Some(path) => Some(JsonLines::create(path, args.force).map_err(super::store_error)?),
+        None => None,
+    };
+    let e = evaluate_task_with(
+        &t.task,
+        plans,
+        &controller,
+        (args.groups, args.per_group),
+        args.seed,
+        &mut |r| match records.as_mut() {
+            Some(w) => w.append(&r).map_err(|e| RunError::Record(e.to_string())),
+            None => Ok(()),
+        },
+    )?;
+    print_eval(&e);
+    if let (Some(w), Some(path)) = (records, &args.trajectories) {
+        w.finish().map_err(super::store_error)?;
+        println!("wrote {} runs to {}", args.groups * args.per_group, path.display());
+    }
     if let Some(out) = &args.out {
         draw(&t.task, &e, out, args.force)?;
         println!("wrote {}", out.display());
     }
-    print_eval(&e);
     Ok(())
 }

@@ -48,6 +48,9 @@ pub struct TaskEval {
     pub falls: usize,
     /// Runs that timed out.
     pub timeouts: usize,
+    /// Completed runs that failed by entering a region the spec says to avoid.
+    #[serde(default)]
+    pub entered: usize,
     /// A few runs, for pictures.
     pub examples: Vec<Execution>,
 }
@@ -120,8 +123,21 @@ pub fn evaluate_task(
     task: &Task,
     plans: Plans<'_>,
     controller: &Controller,
+    sizes: (usize, usize),
+    seed: u64,
+) -> Result<TaskEval, RunError> {
+    evaluate_task_with(task, plans, controller, sizes, seed, &mut |_| Ok(()))
+}
+
+/// [`evaluate_task`], handing every run to `on_run` as it is judged (in order: group
+/// by group), e.g. to record it ([`RunRecord`]).
+pub fn evaluate_task_with(
+    task: &Task,
+    plans: Plans<'_>,
+    controller: &Controller,
     (groups, per_group): (usize, usize),
     seed: u64,
+    on_run: &mut dyn FnMut(RunRecord) -> Result<(), RunError>,
 ) -> Result<TaskEval, RunError> {
     let spec = task.execution_spec();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -131,9 +147,10 @@ pub fn evaluate_task(
         collisions: 0,
         falls: 0,
         timeouts: 0,
+        entered: 0,
         examples: vec![],
     };
-    for _ in 0..groups {
+    for group in 0..groups {
         let g0 = task.sample_starts(&mut rng, per_group)?;
         let noise = task.sample_noise(&mut rng, per_group)?;
         let paths = plans.plan(task, &g0, &noise, &mut rng)?;
@@ -149,15 +166,15 @@ pub fn evaluate_task(
         }
         let episodes = drive(&mut envs, dispatchers, &mut raw, &mut MeanActions::new(controller))?;
         let (mut sat, mut steps) = (0usize, 0.0f64);
-        for (e, path) in episodes.into_iter().zip(&paths) {
-            let run =
-                e.dispatcher.into_execution(&spec, task.steps, path.clone(), e.trajectory, e.control_return);
+        for (index, (e, path)) in episodes.into_iter().zip(&paths).enumerate() {
+            let run = e.dispatcher.into_execution(&spec, path.clone(), e.trajectory, e.control_return);
             match run.outcome {
                 Outcome::Collided => eval.collisions += 1,
                 Outcome::Fell => eval.falls += 1,
                 Outcome::TimedOut => eval.timeouts += 1,
-                Outcome::Completed => {}
+                Outcome::Completed => eval.entered += usize::from(run.entered.is_some()),
             }
+            on_run(RunRecord::of(&run, task, group, index))?;
             if run.satisfied() {
                 sat += 1;
                 steps += reach_steps(&run, task);
@@ -172,6 +189,56 @@ pub fn evaluate_task(
         }
     }
     Ok(eval)
+}
+
+/// One evaluated run as `schrl eval --trajectories` writes it: one JSON object per
+/// line, everything needed to re-check the run with other tools (or with `schrl
+/// robustness --task … --runs …`, which judges `reached`, `reached_at` and
+/// `positions` again).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunRecord {
+    /// Evaluation group (0-based).
+    pub group: usize,
+    /// Run within its group (0-based).
+    pub index: usize,
+    /// Completed, and the spec held on what the robot did.
+    pub satisfied: bool,
+    /// How it ended: `satisfied`, `collided`, `fell`, `timed out`, `entered R at step
+    /// k`, or `completed, spec violated` ([`Execution::verdict`]).
+    pub outcome: String,
+    /// Hard robustness of the executed path (`null` when not every waypoint was reached).
+    pub robustness: Option<f64>,
+    /// Environment steps taken.
+    pub steps: usize,
+    /// Steps to reach under the task's count, for a satisfying run.
+    pub steps_to_reach: Option<usize>,
+    /// The plan: the start, then its waypoints.
+    pub waypoints: Vec<Vec<f64>>,
+    /// The start, then the robot's position when it reached each waypoint.
+    pub reached: Vec<Vec<f64>>,
+    /// The environment step at which each waypoint was reached.
+    pub reached_at: Vec<usize>,
+    /// The robot's position before the first step and after every environment step.
+    pub positions: Vec<Vec<f64>>,
+}
+
+impl RunRecord {
+    /// The record of `run`, run `index` of group `group` of an evaluation of `task`.
+    pub fn of(run: &Execution, task: &Task, group: usize, index: usize) -> Self {
+        Self {
+            group,
+            index,
+            satisfied: run.satisfied(),
+            outcome: run.verdict(),
+            robustness: run.robustness.is_finite().then_some(run.robustness),
+            steps: run.steps,
+            steps_to_reach: run.satisfied().then(|| reach_steps(run, task) as usize),
+            waypoints: run.planned.clone(),
+            reached: run.executed.clone(),
+            reached_at: run.reached_at.clone(),
+            positions: run.trajectory.clone(),
+        }
+    }
 }
 
 /// What [`evaluate_controller`] measured.

@@ -7,11 +7,14 @@
 //! the task's step limit. It satisfies the task when it completed (so its whole
 //! trajectory was collision-free) and the spec holds on the *executed* path: the start
 //! followed by the robot's positions at the moments it reached each waypoint, with
-//! `safe` checked at those positions ([`crate::task::Task::execution_spec`]). Steps to
-//! reach: environment steps until the last waypoint was reached.
+//! `safe` checked at those positions and regions to avoid on every step of the
+//! trajectory ([`crate::task::along::ExecutionSpec`]). Steps to reach: environment
+//! steps until the last waypoint was reached.
 
 use serde::{Deserialize, Serialize};
 use sim::{Env, Step};
+
+use crate::task::along::{Entry, ExecutionSpec};
 
 /// How a run ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -118,19 +121,19 @@ impl WaypointDispatcher {
     }
 
     /// The run as an [`Execution`] judged by `spec` (the task's
-    /// [`crate::task::Task::execution_spec`]; `steps`: the task's waypoints after the
-    /// start). A run not yet over counts as timed out.
+    /// [`crate::task::Task::execution_spec`]). A run not yet over counts as timed out.
     pub fn into_execution(
         self,
-        spec: &stl::Spec,
-        steps: usize,
+        spec: &ExecutionSpec,
         planned: Vec<Vec<f64>>,
         trajectory: Vec<Vec<f64>>,
         control_return: f64,
     ) -> Execution {
+        let judged = spec.judge(&self.reached, &trajectory, &self.reached_at);
         Execution {
             planned,
-            robustness: executed_robustness(spec, &self.reached, steps),
+            robustness: judged.robustness,
+            entered: judged.entered,
             outcome: self.outcome.unwrap_or(Outcome::TimedOut),
             steps: self.steps,
             executed: self.reached,
@@ -161,12 +164,28 @@ pub struct Execution {
     pub control_return: f64,
     /// Hard robustness of the executed path (−∞ when it did not complete).
     pub robustness: f64,
+    /// The region to avoid whose entry failed the spec, if that is why it failed.
+    #[serde(default)]
+    pub entered: Option<Entry>,
 }
 
 impl Execution {
     /// Completed, and the spec holds on the executed path.
     pub fn satisfied(&self) -> bool {
         self.outcome == Outcome::Completed && self.robustness > 0.0
+    }
+
+    /// How the run ended, in words: `satisfied`, `collided`, `fell`, `timed out`,
+    /// `entered hazard at step 312`, or `completed, spec violated`.
+    pub fn verdict(&self) -> String {
+        match (self.outcome, &self.entered) {
+            (Outcome::Completed, _) if self.satisfied() => "satisfied".into(),
+            (Outcome::Completed, Some(e)) => e.to_string(),
+            (Outcome::Completed, None) => "completed, spec violated".into(),
+            (Outcome::Collided, _) => "collided".into(),
+            (Outcome::Fell, _) => "fell".into(),
+            (Outcome::TimedOut, _) => "timed out".into(),
+        }
     }
 
     /// Environment steps until `waypoints` waypoints were reached (`None`: all of
@@ -178,16 +197,6 @@ impl Execution {
             Some(n) => n.checked_sub(1).and_then(|i| self.reached_at.get(i)).copied(),
         }
     }
-}
-
-/// Hard robustness of an executed path under `spec` (−∞ unless it has every
-/// waypoint).
-pub fn executed_robustness(spec: &stl::Spec, executed: &[Vec<f64>], steps: usize) -> f64 {
-    if executed.len() != steps + 1 {
-        return f64::NEG_INFINITY;
-    }
-    let flat: Vec<f64> = executed.iter().flatten().copied().collect();
-    spec.robustness(&flat, &stl::Semantics::hard()).unwrap_or(f64::NEG_INFINITY)
 }
 
 /// Puts `env` at a path's start with its first waypoint as the goal.

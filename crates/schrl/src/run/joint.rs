@@ -440,7 +440,6 @@ impl JointTrainer {
             }
             out.push(run.dispatcher.into_execution(
                 &spec,
-                self.task.steps,
                 paths[i].clone(),
                 run.trajectory,
                 run.control_return,

@@ -31,4 +31,7 @@ pub enum RunError {
     /// An environment refused something.
     #[error(transparent)]
     Env(#[from] sim::EnvError),
+    /// A run could not be recorded (`schrl eval --trajectories`).
+    #[error("recording a run: {0}")]
+    Record(String),
 }

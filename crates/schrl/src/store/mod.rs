@@ -32,6 +32,7 @@
 
 pub mod controller;
 pub mod joint;
+mod lines;
 mod metrics;
 pub mod planner;
 pub mod sdf;
@@ -45,6 +46,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+pub use lines::JsonLines;
 pub use metrics::MetricsLog;
 
 /// The manifest's file name.

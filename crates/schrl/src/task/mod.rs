@@ -15,6 +15,7 @@
 //! `G[1,T] safe`. The Signal tasks of ground robots are on the empty plane, as in
 //! the reference setup (their final goal, the origin, lies inside the walls' cross).
 
+pub mod along;
 pub mod neural_sdf;
 
 use std::path::{Path, PathBuf};
@@ -455,6 +456,37 @@ impl Task {
         self.formula.clone()
     }
 
+    /// The goals the spec says to stay out of over a window, checked between
+    /// waypoints (the rule: [`along`]), in order of first appearance.
+    pub fn avoid_regions(&self) -> Vec<&GoalRegion> {
+        let mut found = vec![];
+        along::mark_avoided(&self.formula, &self.goal_names(), &mut found);
+        found.iter().filter_map(|n| self.goals.iter().find(|g| &g.name == n)).collect()
+    }
+
+    /// The formula the planner and the evaluation read: the spec with its avoid
+    /// occurrences bound to checks along the path ([`along`]).
+    pub fn planning_formula(&self) -> Formula {
+        along::mark_avoided(&self.formula, &self.goal_names(), &mut vec![])
+    }
+
+    /// The goal regions as a picture shows them: regions to avoid marked.
+    pub fn picture_goals(&self) -> Vec<sim::render::Goal> {
+        let avoid = self.avoid_regions();
+        self.goals
+            .iter()
+            .map(|g| sim::render::Goal {
+                center: g.center.clone(),
+                radius: g.radius,
+                avoid: avoid.iter().any(|a| a.name == g.name),
+            })
+            .collect()
+    }
+
+    fn goal_names(&self) -> Vec<&str> {
+        self.goals.iter().map(|g| g.name.as_str()).collect()
+    }
+
     /// The scalar predicates by name: goals, `safe`, and the Signal counter.
     pub fn predicates(&self) -> Vec<(String, Arc<dyn Predicate>)> {
         let mut out: Vec<(String, Arc<dyn Predicate>)> = self
@@ -485,24 +517,27 @@ impl Task {
         Tensor::from_vec(v, (n, self.steps, dim), &Device::Cpu)
     }
 
-    /// The spec for single paths (plain Rust, exact gradients).
+    /// The spec for single paths (plain Rust, exact gradients), avoid regions along
+    /// the segments ([`along`]).
     pub fn spec(&self) -> Spec {
         let dim = self.map.dim();
         self.predicates()
             .into_iter()
-            .fold(Spec::builder(self.formula()).state_dim(dim), |b, (n, p)| b.bind_shared(n, p))
+            .chain(along::planning_bindings(self))
+            .fold(Spec::builder(self.planning_formula()).state_dim(dim), |b, (n, p)| b.bind_shared(n, p))
             .build()
             .expect("task names are checked when the task is loaded")
     }
 
-    /// The spec a run is judged by ([`crate::run::execute`]): the task's spec with `safe`
-    /// at the executed path's states only. The straight segments between the
-    /// positions where waypoints were reached are not what the robot drove; its
-    /// actual trajectory is checked for collisions at every step, which is stronger.
-    /// (Point Branch seed 2: 28 % of collision-free runs that reached every waypoint
-    /// failed the segment check where the reached positions cut a door's corner.)
-    pub fn execution_spec(&self) -> Spec {
-        Task { safe_along: SafeAlong::Waypoints, ..self.clone() }.spec()
+    /// The spec a run is judged by ([`crate::run::execute`], [`along::ExecutionSpec`]):
+    /// `safe` at the positions where waypoints were reached, not on the straight
+    /// segments between them, which are not what the robot drove; its trajectory is
+    /// checked for collisions at every step, which is stronger. (Point Branch seed 2:
+    /// 28 % of collision-free runs that reached every waypoint failed the segment
+    /// check where the reached positions cut a door's corner.) Avoid regions are
+    /// checked on every step of the trajectory.
+    pub fn execution_spec(&self) -> along::ExecutionSpec {
+        along::ExecutionSpec::new(self)
     }
 
     /// The spec for batches of paths as tensors (differentiable in candle).
@@ -510,7 +545,10 @@ impl Task {
         let dim = self.map.dim();
         self.predicates()
             .into_iter()
-            .fold(TensorSpec::builder(self.formula(), dim), |b, (n, p)| b.bind_shared_predicate(n, p))
+            .chain(along::planning_bindings(self))
+            .fold(TensorSpec::builder(self.planning_formula(), dim), |b, (n, p)| {
+                b.bind_shared_predicate(n, p)
+            })
             .build()
             .expect("task names are checked when the task is loaded")
     }

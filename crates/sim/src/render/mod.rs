@@ -3,7 +3,8 @@
 //!
 //! Ground maps are drawn from above. The Drone's world gets a top view (x, y) above
 //! a side view (x, z) at the same scale, each with its axes in metres, under a legend:
-//! walls are grey, the duck yellow, goals green discs of their radius, planned
+//! walls are grey, the duck yellow, goals green discs of their radius (regions to
+//! avoid red), planned
 //! waypoints blue dots joined by thin lines (another planner's purple), executed trajectories orange, the robot a
 //! black circle with a line showing its heading. Charts (training curves, result bars)
 //! are in [`save_chart`] and [`save_bars`]; text uses an embedded font (`style`).
@@ -22,11 +23,11 @@ mod chart;
 mod style;
 
 pub use chart::{BarChart, BarPanel, ChartPanel, Series, save_bars, save_chart};
-pub use style::tick_label;
 use style::{
-    COMPARED, DUCK, EXECUTED, GOAL, GRID, LEGEND_HEIGHT, LegendEntry, Mark, PLANNED, WALL, axes, draw_legend,
-    write_picture,
+    AVOID, COMPARED, DUCK, EXECUTED, GOAL, GRID, LEGEND_HEIGHT, LegendEntry, Mark, PLANNED, WALL, axes,
+    draw_legend, write_picture,
 };
+pub use style::{check_target, tick_label};
 
 /// A goal region: centre (plan space) and radius.
 #[derive(Clone, Debug, PartialEq)]
@@ -35,6 +36,8 @@ pub struct Goal {
     pub center: Vec<f64>,
     /// Radius (m).
     pub radius: f64,
+    /// A region to stay out of (drawn red), not one to reach (green).
+    pub avoid: bool,
 }
 
 /// What a polyline shows.
@@ -270,13 +273,14 @@ where
         }
     }
     for g in &scene.goals {
+        let colour = if g.avoid { AVOID } else { GOAL };
         let pts = circle_points(view.project(&g.center), g.radius);
         chart
-            .draw_series(std::iter::once(Polygon::new(pts.clone(), GOAL.mix(0.25).filled())))
+            .draw_series(std::iter::once(Polygon::new(pts.clone(), colour.mix(0.25).filled())))
             .map_err(err)?;
         let mut ring = pts;
         ring.push(ring[0]);
-        chart.draw_series(std::iter::once(PathElement::new(ring, GOAL.stroke_width(2)))).map_err(err)?;
+        chart.draw_series(std::iter::once(PathElement::new(ring, colour.stroke_width(2)))).map_err(err)?;
     }
     for path in &scene.paths {
         let pts: Vec<(f64, f64)> = path.points.iter().map(|p| view.project(p)).collect();
@@ -339,8 +343,11 @@ fn legend(scene: &Scene) -> Vec<LegendEntry> {
         Map::Duck(_) => out.push(entry("duck", DUCK, Mark::Patch)),
         Map::Empty(_) | Map::Floor => {}
     }
-    if !scene.goals.is_empty() {
+    if scene.goals.iter().any(|g| !g.avoid) {
         out.push(entry("goals", GOAL, Mark::Patch));
+    }
+    if scene.goals.iter().any(|g| g.avoid) {
+        out.push(entry("regions to avoid", AVOID, Mark::Patch));
     }
     if scene.paths.iter().any(|p| p.kind == PathKind::Planned) {
         out.push(entry(&scene.labels.planned, PLANNED, Mark::Dots));

@@ -23,6 +23,8 @@ pub(crate) const WALL: RGBColor = RGBColor(90, 90, 96);
 pub(crate) const DUCK: RGBColor = RGBColor(240, 200, 40);
 /// Goals.
 pub(crate) const GOAL: RGBColor = RGBColor(40, 170, 80);
+/// Regions a spec says to stay out of.
+pub(crate) const AVOID: RGBColor = RGBColor(215, 30, 40);
 /// Planned waypoints.
 pub(crate) const PLANNED: RGBColor = RGBColor(40, 90, 220);
 /// Another planner's waypoints.
@@ -154,6 +156,28 @@ where
 
 /// Writes a picture of `size` pixels to `out` through a temporary file and a rename,
 /// choosing the backend by extension; refuses to replace a file unless `overwrite`.
+/// Checks that a picture can be written to `out` (a `.png` or `.svg` name in an
+/// existing directory, not an existing file unless `overwrite`) and returns its
+/// format; callers check before long work, so a bad `--out` fails at once.
+pub fn check_target(out: &Path, overwrite: bool) -> Result<&'static str, RenderError> {
+    let ext = match out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("png") => "png",
+        Some("svg") => "svg",
+        _ => return Err(RenderError::Format(out.to_path_buf())),
+    };
+    if out.exists() && !overwrite {
+        return Err(RenderError::Exists(out.to_path_buf()));
+    }
+    let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if !dir.is_dir() {
+        return Err(RenderError::Write {
+            path: out.to_path_buf(),
+            message: format!("the directory {} does not exist", dir.display()),
+        });
+    }
+    Ok(ext)
+}
+
 pub(crate) fn write_picture(
     out: &Path,
     overwrite: bool,
@@ -162,14 +186,7 @@ pub(crate) fn write_picture(
     svg: impl FnOnce(DrawingArea<SVGBackend, Shift>) -> Result<(), String>,
 ) -> Result<(), RenderError> {
     ensure_fonts();
-    let ext = out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    if !matches!(ext.as_deref(), Some("png" | "svg")) {
-        return Err(RenderError::Format(out.to_path_buf()));
-    }
-    if out.exists() && !overwrite {
-        return Err(RenderError::Exists(out.to_path_buf()));
-    }
-    let ext = ext.unwrap();
+    let ext = check_target(out, overwrite)?;
     let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("picture");
     let tmp = out.with_file_name(format!(".{stem}.{}.tmp.{ext}", std::process::id()));
     let result = if ext == "png" {
