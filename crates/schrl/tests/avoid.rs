@@ -182,3 +182,23 @@ fn a_run_failing_for_another_reason_is_not_blamed_on_the_region() {
     let j = spec.judge(&executed, &traj, &reached_at);
     assert!(j.robustness < 0.0 && j.entered.is_none(), "{j:?}");
 }
+
+#[test]
+fn the_planner_keeps_a_margin_from_regions_to_avoid_and_never_shrinks_them() {
+    // Regression (Point keys seed 0): the goal margin shrank the hazard with the goals,
+    // plans grazed it, and 86 % of runs cut into it on the controller's curves.
+    let task = keys_with("G[1,6] !hazard");
+    let planned = task.with_goal_margin(0.3).with_safe_margin(0.1);
+    let hazard = |t: &Task| t.goals.iter().find(|g| g.name == "hazard").unwrap().radius;
+    assert_eq!(hazard(&planned), hazard(&task));
+    assert!(planned.goals.iter().filter(|g| g.name != "hazard").all(|g| g.radius < 0.5));
+    // A path passing 0.45 m from the hazard's centre: clear of it by 5 cm, which is
+    // enough for the run but not for the planner's 10 cm margin.
+    let mut path = flat(&AROUND);
+    path[2] = 2.45;
+    path[4] = 2.45;
+    path[6] = 2.45;
+    let rho = |t: &Task| t.spec().robustness(&path, &Semantics::hard()).unwrap();
+    assert!((rho(&task) - 0.05).abs() < 1e-9, "{}", rho(&task));
+    assert!((rho(&planned) + 0.05).abs() < 1e-9, "{}", rho(&planned));
+}

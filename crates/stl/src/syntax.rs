@@ -28,7 +28,8 @@ use std::fmt;
 
 use crate::formula::{CmpOp, Formula, Interval};
 
-/// Deepest nesting accepted, so that hostile input cannot overflow the stack.
+/// Deepest nesting accepted, so that hostile input cannot overflow the stack: levels
+/// of parentheses, prefix operators (`!`, `X`, `F`, `G`) and right-nested `->`/`U`.
 pub const MAX_DEPTH: usize = 256;
 
 /// Largest interval bound accepted.
@@ -128,6 +129,8 @@ fn lex(src: &str) -> Result<Vec<Token>, ParseError> {
                 i += 1;
                 col += 1;
             }
+            // A UTF-8 byte-order mark (editors on Windows write one) is not text.
+            '\u{feff}' if i == 0 => i += 1,
             '#' => {
                 while i < chars.len() && chars[i] != '\n' {
                     i += 1;
@@ -241,26 +244,27 @@ impl Parser {
         }
     }
 
-    fn enter(&mut self) -> Result<(), ParseError> {
+    /// Parses one more level of nesting with `inner`.
+    fn nested<T>(&mut self, inner: impl FnOnce(&mut Self) -> Result<T, ParseError>) -> Result<T, ParseError> {
         self.depth += 1;
         if self.depth > MAX_DEPTH {
-            return Err(self.error_here(format!("at most {MAX_DEPTH} levels of nesting")));
+            return Err(self.error_here(format!(
+                "at most {MAX_DEPTH} levels of nesting (parentheses, !, X, F, G, and -> or U chained to the right)"
+            )));
         }
-        Ok(())
+        let out = inner(self);
+        self.depth -= 1;
+        out
     }
 
     fn implies(&mut self) -> Result<Formula, ParseError> {
-        self.enter()?;
         let lhs = self.or()?;
-        let f = if *self.peek() == Tok::Arrow {
-            self.bump();
-            let rhs = self.implies()?;
-            Formula::Implies(Box::new(lhs), Box::new(rhs))
-        } else {
-            lhs
-        };
-        self.depth -= 1;
-        Ok(f)
+        if *self.peek() != Tok::Arrow {
+            return Ok(lhs);
+        }
+        self.bump();
+        let rhs = self.nested(Self::implies)?;
+        Ok(Formula::Implies(Box::new(lhs), Box::new(rhs)))
     }
 
     fn or(&mut self) -> Result<Formula, ParseError> {
@@ -282,48 +286,41 @@ impl Parser {
     }
 
     fn until(&mut self) -> Result<Formula, ParseError> {
-        self.enter()?;
         let lhs = self.unary()?;
-        let f = if self.is_keyword("U") {
-            self.bump();
-            let iv = self.opt_interval()?;
-            let rhs = self.until()?;
-            Formula::Until(iv, Box::new(lhs), Box::new(rhs))
-        } else {
-            lhs
-        };
-        self.depth -= 1;
-        Ok(f)
+        if !self.is_keyword("U") {
+            return Ok(lhs);
+        }
+        self.bump();
+        let iv = self.opt_interval()?;
+        let rhs = self.nested(Self::until)?;
+        Ok(Formula::Until(iv, Box::new(lhs), Box::new(rhs)))
     }
 
     fn unary(&mut self) -> Result<Formula, ParseError> {
-        self.enter()?;
-        let f = match self.peek().clone() {
+        Ok(match self.peek().clone() {
             Tok::Bang => {
                 self.bump();
-                Formula::Not(Box::new(self.unary()?))
+                Formula::Not(Box::new(self.nested(Self::unary)?))
             }
             Tok::Name(n) if n == "X" => {
                 self.bump();
-                Formula::Next(Box::new(self.unary()?))
+                Formula::Next(Box::new(self.nested(Self::unary)?))
             }
             Tok::Name(n) if n == "F" || n == "G" => {
                 self.bump();
                 let iv = self.opt_interval()?;
-                let body = Box::new(self.unary()?);
+                let body = Box::new(self.nested(Self::unary)?);
                 if n == "F" { Formula::Eventually(iv, body) } else { Formula::Globally(iv, body) }
             }
             _ => self.atom()?,
-        };
-        self.depth -= 1;
-        Ok(f)
+        })
     }
 
     fn atom(&mut self) -> Result<Formula, ParseError> {
         match self.peek().clone() {
             Tok::LParen => {
                 self.bump();
-                let f = self.implies()?;
+                let f = self.nested(Self::implies)?;
                 self.expect(Tok::RParen, "')' to close the '(' or an operator (&, |, ->, U)")?;
                 Ok(f)
             }
@@ -567,6 +564,24 @@ mod tests {
         assert!(parse(&src).unwrap_err().expected.contains("nesting"));
         let src = "!".repeat(100_000) + "a";
         assert!(parse(&src).is_err());
+        let src = "a U ".repeat(100_000) + "b";
+        assert!(parse(&src).unwrap_err().expected.contains("nesting"));
+    }
+
+    #[test]
+    fn nesting_is_counted_as_the_message_says() {
+        // Regression: each parenthesis once counted three levels, so "at most 256
+        // levels" refused 86 parentheses.
+        let parens = |n: usize| "(".repeat(n) + "a" + &")".repeat(n);
+        assert!(parse(&parens(MAX_DEPTH)).is_ok());
+        assert!(parse(&parens(MAX_DEPTH + 1)).unwrap_err().expected.contains("at most 256 levels"));
+        assert!(parse(&("!".repeat(MAX_DEPTH) + "a")).is_ok());
+        assert!(parse(&("G ".repeat(MAX_DEPTH + 1) + "a")).is_err());
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_skipped() {
+        assert_eq!(parse("\u{feff}F a").unwrap(), parse("F a").unwrap());
     }
 
     #[test]

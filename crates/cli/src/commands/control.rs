@@ -40,7 +40,7 @@ pub struct TrainArgs {
     #[arg(long)]
     preset: Option<String>,
     /// Environments stepped together.
-    #[arg(long)]
+    #[arg(long, value_parser = super::count::<1, 4096>)]
     num_envs: Option<usize>,
     #[command(flatten)]
     run: super::RunDirArgs,
@@ -48,7 +48,7 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 25)]
     save_every: usize,
     /// Episodes of the evaluation after training (0: none).
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = 200, value_parser = super::count::<0, 100_000>)]
     eval_episodes: usize,
 }
 
@@ -59,7 +59,7 @@ pub struct EvalArgs {
     #[arg(long)]
     ckpt: PathBuf,
     /// Episodes (one random start and goal each).
-    #[arg(long, default_value_t = 500)]
+    #[arg(long, default_value_t = 500, value_parser = super::count::<1, 100_000>)]
     episodes: usize,
     /// Seed of starts and goals.
     #[arg(long, default_value_t = EVAL_SEED)]
@@ -68,7 +68,7 @@ pub struct EvalArgs {
     #[arg(long)]
     map: Option<String>,
     /// Step limit of an episode.
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = 1000, value_parser = super::count::<1, 1_000_000>)]
     max_steps: usize,
     /// Draw a few executed trajectories to this PNG or SVG.
     #[arg(long)]

@@ -33,6 +33,13 @@ impl RunDirArgs {
     }
 }
 
+/// A count flag's parser: a whole number in `LO..=HI`. The bounds keep what a flag
+/// allocates finite (`plan sample --n 3000000` once aborted on allocation).
+pub fn count<const LO: usize, const HI: usize>(s: &str) -> Result<usize, String> {
+    let n: usize = s.trim().parse().map_err(|_| format!("'{s}' is not a whole number"))?;
+    if (LO..=HI).contains(&n) { Ok(n) } else { Err(format!("{n} is outside {LO}..={HI}")) }
+}
+
 /// A store error as the command line says it: with the flag that would help.
 pub fn store_error(e: StoreError) -> anyhow::Error {
     let hint = match &e {

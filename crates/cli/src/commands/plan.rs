@@ -40,7 +40,7 @@ pub struct CompareArgs {
     #[arg(long)]
     ckpt: PathBuf,
     /// Starts to plan from.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 3, value_parser = super::count::<1, 100>)]
     n: usize,
     /// Seed of the starts and the gradient planner's initialisations.
     #[arg(long, default_value_t = 1)]
@@ -60,7 +60,7 @@ pub struct CheckpointStarts {
     #[arg(long)]
     ckpt: PathBuf,
     /// Starts to plan from (the paper times 100).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = 100, value_parser = super::count::<1, 100_000>)]
     n: usize,
     /// Seed of the starts, the sampling noise and the gradient planner's initialisations.
     #[arg(long, default_value_t = 1)]

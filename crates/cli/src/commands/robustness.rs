@@ -44,6 +44,9 @@ pub struct Args {
     gradient: Option<PathBuf>,
 }
 
+/// The largest trace read (64 MiB: a million rows of a few signals).
+const MAX_TRACE_BYTES: u64 = 64 << 20;
+
 /// A trace read from CSV: signal names and row-major values.
 pub struct Trace {
     /// Header names.
@@ -55,11 +58,10 @@ pub struct Trace {
 /// Reads a CSV trace, checking names, shape and numbers.
 pub fn read_trace(path: &std::path::Path) -> Result<Trace> {
     let shown = path.display();
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(true)
-        .trim(csv::Trim::All)
-        .from_path(path)
+    let text = schrl::task::read_text(path, MAX_TRACE_BYTES)
         .with_context(|| format!("cannot read trace {shown}"))?;
+    let mut rdr =
+        csv::ReaderBuilder::new().has_headers(true).trim(csv::Trim::All).from_reader(text.as_bytes());
     let names: Vec<String> = rdr
         .headers()
         .with_context(|| format!("{shown}: cannot read the header row"))?

@@ -28,7 +28,7 @@ pub struct RenderArgs {
     #[arg(long)]
     out: PathBuf,
     /// Draw the trajectory of this many random-action steps.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, value_parser = super::count::<0, 1_000_000>)]
     rollout: usize,
     /// Seed of the start, goal and random actions.
     #[arg(long, default_value_t = 0)]

@@ -19,7 +19,7 @@ impl SpecText {
         match arg.strip_prefix('@') {
             Some(path) => {
                 let path = PathBuf::from(path);
-                let text = std::fs::read_to_string(&path)
+                let text = schrl::task::read_text(&path, schrl::task::MAX_TASK_FILE_BYTES)
                     .with_context(|| format!("cannot read spec file {}", path.display()))?;
                 Ok(Self { text, origin: Some(path) })
             }

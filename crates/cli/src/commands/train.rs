@@ -55,7 +55,7 @@ pub struct TrainArgs {
     #[arg(long)]
     planner: Option<PlannerKind>,
     /// Paths planned and executed per iteration [default: 8].
-    #[arg(long)]
+    #[arg(long, value_parser = super::count::<1, 4096>)]
     plan_batch: Option<usize>,
     /// Weight of the planner's policy-gradient term [default: 0.1].
     #[arg(long)]
@@ -69,7 +69,7 @@ pub struct TrainArgs {
     pretrain_updates: Option<usize>,
     /// Planners pre-trained from different seeds; the shortest satisfying one is kept
     /// [default: 3].
-    #[arg(long)]
+    #[arg(long, value_parser = super::count::<1, 100>)]
     pretrain_candidates: Option<usize>,
     /// Weight of the path-length stand-in for r_l while pre-training (per metre)
     /// [default: 0.05].
@@ -105,7 +105,7 @@ pub struct TrainArgs {
     #[command(flatten)]
     run: super::RunDirArgs,
     /// Evaluation groups of 100 runs after training; 0: none [default: 5].
-    #[arg(long)]
+    #[arg(long, value_parser = super::count::<0, 100>)]
     eval_groups: Option<usize>,
     /// Iterations between checkpoints [default: 50].
     #[arg(long)]
@@ -272,10 +272,10 @@ pub struct EvalArgs {
     #[arg(long)]
     ckpt: PathBuf,
     /// Groups of runs.
-    #[arg(long, default_value_t = EVAL_GROUPS)]
+    #[arg(long, default_value_t = EVAL_GROUPS, value_parser = super::count::<1, 100>)]
     groups: usize,
     /// Runs per group.
-    #[arg(long, default_value_t = EVAL_PER_GROUP)]
+    #[arg(long, default_value_t = EVAL_PER_GROUP, value_parser = super::count::<1, 10_000>)]
     per_group: usize,
     /// Seed of starts and plans.
     #[arg(long, default_value_t = EVAL_SEED)]

@@ -106,9 +106,9 @@ pub struct SegmentRegion {
 }
 
 impl SegmentRegion {
-    /// The disc of `goal`, checked along segments.
-    pub fn new(goal: &GoalRegion) -> Self {
-        Self { ball: Ball::new(goal.center.clone(), goal.radius) }
+    /// The disc of `goal` grown by `margin`, checked along segments.
+    pub fn new(goal: &GoalRegion, margin: f64) -> Self {
+        Self { ball: Ball::new(goal.center.clone(), goal.radius + margin) }
     }
 
     /// Where along `a → b` the closest point to the centre lies (0 at `a`).
@@ -194,7 +194,9 @@ impl Predicate for Column {
 pub(super) fn planning_bindings(task: &Task) -> Vec<(String, Arc<dyn Predicate>)> {
     task.avoid_regions()
         .into_iter()
-        .map(|g| (along_name(&g.name), Arc::new(SegmentRegion::new(g)) as Arc<dyn Predicate>))
+        .map(|g| {
+            (along_name(&g.name), Arc::new(SegmentRegion::new(g, task.avoid_margin)) as Arc<dyn Predicate>)
+        })
         .collect()
 }
 
