@@ -98,3 +98,37 @@ fn bad_input_is_a_clear_error() {
     fails_with(&["robustness", "--spec", "F x > 1", "--trace", "/nonexistent/t.csv"], "cannot read trace");
     fails_with(&["robustness", "--spec", "@/nonexistent/s.stl", "--trace", ok], "cannot read spec file");
 }
+
+#[test]
+fn inputs_without_end_starts_past_the_end_and_overwriting_the_input_are_refused() {
+    let ok = write("ok3.csv", "x,y\n0,0\n1,1\n");
+    let ok = ok.to_str().unwrap();
+    // Regression: these read until memory ran out.
+    fails_with(&["robustness", "--spec", "@/dev/zero", "--trace", ok], "larger than 1024 KiB");
+    fails_with(&["robustness", "--spec", "F x > 0", "--trace", "/dev/zero"], "larger than");
+    // Regression: --at past the end answered the last step's value.
+    fails_with(
+        &["robustness", "--spec", "x > 0", "--trace", ok, "--at", "2"],
+        "--at 2: the trace has 2 rows",
+    );
+    assert_eq!(last_line(&schrl(&["robustness", "--spec", "x > 0", "--trace", ok, "--at", "1"])), "1");
+    // Regression: --gradient onto the trace overwrote the input.
+    fails_with(&["robustness", "--spec", "F x > 0", "--trace", ok, "--gradient", ok], "is the trace itself");
+    assert_eq!(std::fs::read_to_string(ok).unwrap(), "x,y\n0,0\n1,1\n");
+    let grad = write("kept.csv", "precious");
+    let g = grad.to_str().unwrap();
+    fails_with(&["robustness", "--spec", "F x > 0", "--trace", ok, "--gradient", g], "--force");
+    assert_eq!(std::fs::read_to_string(&grad).unwrap(), "precious");
+    assert!(
+        schrl(&["robustness", "--spec", "F x > 0", "--trace", ok, "--gradient", g, "--force"])
+            .status
+            .success()
+    );
+    // `true` is +∞ in STL, not the library's finite stand-in.
+    assert_eq!(last_line(&schrl(&["robustness", "--spec", "true", "--trace", ok])), "inf");
+    assert_eq!(last_line(&schrl(&["robustness", "--spec", "false | x > 5", "--trace", ok])), "-5");
+    // A byte-order mark before the spec is not a syntax error.
+    let bom = write("bom.stl", "\u{feff}F x > 0\n");
+    let spec = format!("@{}", bom.display());
+    assert_eq!(last_line(&schrl(&["robustness", "--spec", &spec, "--trace", ok])), "1");
+}

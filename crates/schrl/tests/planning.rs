@@ -167,6 +167,45 @@ fn checkpoint_round_trip_gives_the_same_paths() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+#[test]
+fn planners_with_unusable_weights_or_shapes_are_refused_when_loaded() {
+    // Regression: NaN weights evaluated as "satisfaction: 0" with exit 0.
+    let t =
+        PlanTrainer::new(Task::point(TaskKind::Seq), CpgConfig { batch: 8, ..CpgConfig::default() }).unwrap();
+    {
+        let data = t.varmap().data().lock().unwrap();
+        let var = data.values().next().unwrap();
+        var.set(&(var.as_tensor() * f64::NAN).unwrap()).unwrap();
+    }
+    let dir = std::env::temp_dir().join(format!("schrl-nan-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let settings = PlanRunSettings {
+        task: TaskKind::Seq,
+        safe_along: SafeAlong::Segments,
+        cpg: *t.config(),
+        updates: 0,
+        target: 0.95,
+    };
+    let mut run = RunWriter::create(&dir, RunKind::Planner, &settings, Existing::Refuse).unwrap();
+    run.save(|f| store::planner::save_into(f, &t, 0, false)).unwrap();
+    drop(run);
+    let err = store::planner::load(&dir).err().unwrap().to_string();
+    assert!(err.contains("planner.safetensors") && err.contains("NaN"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+    // Regression: `min_std: -1` and `bound: 0` were accepted.
+    use schrl::plan::planner::{PathPlanner, PlannerConfig};
+    for (cfg, key) in [
+        (PlannerConfig { min_std: -1.0, ..PlannerConfig::reference(2) }, "min_std"),
+        (PlannerConfig { bound: 0.0, ..PlannerConfig::reference(2) }, "bound"),
+        (PlannerConfig { hidden: 0, ..PlannerConfig::reference(2) }, "hidden"),
+    ] {
+        let vm = candle_nn::VarMap::new();
+        let vb = candle_nn::VarBuilder::from_varmap(&vm, candle_core::DType::F32, &Device::Cpu);
+        let err = PathPlanner::new(cfg, vb).err().unwrap().to_string();
+        assert!(err.contains(key), "{err}");
+    }
+}
+
 /// Checking the deployed (mean) paths must not change training: an early version
 /// drew its starts from the training generator, and the same seed then trained
 /// differently depending on how often it was checked.

@@ -90,6 +90,14 @@ pub enum EvalError {
     /// Bad semantics parameters.
     #[error(transparent)]
     Semantics(#[from] SemanticsError),
+    /// The start step lies past the path's end.
+    #[error("start step {at} is past the path's last step {last}")]
+    Start {
+        /// The start step asked for.
+        at: usize,
+        /// The path's last step.
+        last: usize,
+    },
 }
 
 /// How an atom was resolved against the bindings and signals.
@@ -439,13 +447,13 @@ impl Evaluator<'_> {
         Ok(self.ws.signal()[0])
     }
 
-    /// Robustness at start step `t` (clamped to the last step).
+    /// Robustness at start step `t` (a step of the path).
     pub fn robustness_at(&mut self, path: &[f64], t: usize, sem: &Semantics) -> Result<f64, EvalError> {
         let n = self.forward(path, sem)?;
-        Ok(self.ws.signal()[t.min(n - 1)])
+        Ok(self.ws.signal()[start(t, n)?])
     }
 
-    /// Robustness at start step `t`, adding its gradient with respect to the path
+    /// Robustness at start step `t` (a step of the path), adding its gradient with respect to the path
     /// into `grad` (same length as `path`).
     pub fn gradient(
         &mut self,
@@ -458,7 +466,7 @@ impl Evaluator<'_> {
         if grad.len() != path.len() {
             return Err(EvalError::Shape { len: grad.len(), dim: self.spec.state_dim });
         }
-        let t = t.min(n - 1);
+        let t = start(t, n)?;
         let rho = self.ws.signal()[t];
         self.spec.program.backward(t, sem, &mut self.ws, &mut self.dvalues);
         let dim = self.spec.state_dim;
@@ -484,6 +492,11 @@ impl Evaluator<'_> {
             return Err(EvalError::Empty);
         }
         self.spec.program.forward(&self.values, n, sem, &mut self.ws);
-        Ok(self.ws.signal()[t.min(n - 1)])
+        Ok(self.ws.signal()[start(t, n)?])
     }
+}
+
+/// `t` when it is a step of an `n`-step path.
+fn start(t: usize, n: usize) -> Result<usize, EvalError> {
+    if t < n { Ok(t) } else { Err(EvalError::Start { at: t, last: n - 1 }) }
 }

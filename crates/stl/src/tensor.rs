@@ -331,6 +331,12 @@ impl TensorSpec {
         sem: &Semantics,
     ) -> candle_core::Result<Tensor> {
         sem.validate().map_err(candle_core::Error::msg)?;
+        let steps = paths.dims().get(1).copied().unwrap_or(0);
+        if start >= steps {
+            return Err(candle_core::Error::msg(format!(
+                "start step {start} is past the paths' last step ({steps} steps)"
+            )));
+        }
         let values = self.predicate_values(paths)?.contiguous()?;
         values.apply_op1(RobustnessOp::new(self.program.clone(), *sem, start))
     }

@@ -179,7 +179,17 @@ fn check(s: &PlanRunSettings) -> Result<()> {
     if !(0.0..=1.0).contains(&s.target) {
         bail!("--target must be a fraction in [0, 1], got {}", s.target);
     }
+    s.cpg.validate().map_err(|e| anyhow::anyhow!("{}", cpg_flag(&e)))?;
     Ok(())
+}
+
+/// A [`CpgConfig::validate`] message with its key as the flag that sets it
+/// (`cpg.pg_weight` → `--pg-weight`).
+pub fn cpg_flag(message: &str) -> String {
+    match message.strip_prefix("cpg.").and_then(|m| m.split_once(' ')) {
+        Some((key, rest)) => format!("--{} {rest}", key.trim_end_matches(':').replace('_', "-")),
+        None => message.to_string(),
+    }
 }
 
 /// One line of a planner run's `metrics.jsonl`.

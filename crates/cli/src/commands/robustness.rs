@@ -42,6 +42,9 @@ pub struct Args {
     /// Also write ∂ρ/∂trace to this CSV file (same header and shape as the trace).
     #[arg(long)]
     gradient: Option<PathBuf>,
+    /// Replace an existing --gradient file.
+    #[arg(long)]
+    force: bool,
 }
 
 /// The largest trace read (64 MiB: a million rows of a few signals).
@@ -110,16 +113,23 @@ pub fn run(args: Args) -> Result<()> {
     if let (Some(task), Some(runs)) = (&args.task, &args.runs) {
         return rejudge(&super::task::resolve(args.robot, task)?, runs);
     }
-    let (Some(spec), Some(trace)) = (&args.spec, &args.trace) else {
+    let (Some(spec), Some(trace_path)) = (&args.spec, &args.trace) else {
         bail!("--spec and --trace are needed (or --task with --runs)");
     };
     let text = SpecText::load(spec)?;
     let formula = text.parse()?;
-    let trace = read_trace(trace)?;
+    let trace = read_trace(trace_path)?;
     let spec = Spec::builder(formula).signals(trace.names.clone()).build().map_err(|e| text.explain(e))?;
     let mut sem = args.semantics;
     if args.smooth_logic_only {
         sem = sem.logic_only();
+    }
+    let rows = trace.values.len() / trace.names.len();
+    if args.at >= rows {
+        bail!("--at {}: the trace has {rows} rows (steps 0..={})", args.at, rows - 1);
+    }
+    if let Some(out) = &args.gradient {
+        check_gradient_target(out, trace_path, args.force)?;
     }
     let mut ev = spec.evaluator();
     let rho = match &args.gradient {
@@ -131,7 +141,28 @@ pub fn run(args: Args) -> Result<()> {
             rho
         }
     };
-    println!("{rho}");
+    // `true` and `false` are ±∞ in STL; the library carries them as ±top so that
+    // smooth semantics stay finite.
+    match rho {
+        r if r >= sem.top => println!("inf"),
+        r if r <= -sem.top => println!("-inf"),
+        r => println!("{r}"),
+    }
+    Ok(())
+}
+
+/// Refuses a gradient file that is the trace itself, or that exists without --force.
+fn check_gradient_target(out: &std::path::Path, trace: &std::path::Path, force: bool) -> Result<()> {
+    let same = match (std::fs::canonicalize(out), std::fs::canonicalize(trace)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if same {
+        bail!("--gradient {} is the trace itself; write the gradient to another file", out.display());
+    }
+    if out.exists() && !force {
+        bail!("--gradient {} already exists; pass --force to replace it", out.display());
+    }
     Ok(())
 }
 
@@ -201,5 +232,39 @@ fn recorded_outcome(r: &RunRecord, steps: usize) -> Outcome {
         "collided" => Outcome::Collided,
         "fell" => Outcome::Fell,
         _ => Outcome::TimedOut,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 256, failure_persistence: None, ..ProptestConfig::default() })]
+
+        /// Whatever a trace file holds, reading it gives a trace or an error naming
+        /// the file, never a panic; a trace that reads is rectangular and finite.
+        #[test]
+        fn arbitrary_trace_files_read_or_fail_cleanly(
+            text in prop_oneof![
+                "\\PC{0,120}",
+                proptest::collection::vec(
+                    prop_oneof!["x", "y", "x,y", ",", "1", "-2.5", "nan", "inf", "1e400", "\"", " ", "\n", "\r\n"],
+                    0..30,
+                ).prop_map(|v| v.concat()),
+            ]
+        ) {
+            let dir = std::env::temp_dir().join(format!("schrl-trace-fuzz-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            let path = dir.join("t.csv");
+            std::fs::write(&path, &text).unwrap();
+            match super::read_trace(&path) {
+                Ok(t) => {
+                    prop_assert!(!t.names.is_empty() && t.values.len() % t.names.len() == 0);
+                    prop_assert!(t.values.iter().all(|v| v.is_finite()));
+                }
+                Err(e) => prop_assert!(format!("{e:#}").contains("t.csv"), "{:#}", e),
+            }
+        }
     }
 }

@@ -262,6 +262,7 @@ fn check_settings(s: &JointRunSettings) -> Result<()> {
     s.pretrain
         .validate()
         .map_err(|e| anyhow::anyhow!("--{}", e.replace("pretrain.", "pretrain-").replace('_', "-")))?;
+    s.cpg.validate().map_err(|e| anyhow::anyhow!("{}", super::plan::cpg_flag(&e)))?;
     Ok(())
 }
 

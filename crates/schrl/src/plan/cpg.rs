@@ -196,6 +196,31 @@ impl Default for CpgConfig {
     }
 }
 
+impl CpgConfig {
+    /// Checks every number, naming the first bad one by its key (`cpg.pg_weight`).
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if !(1..=65_536).contains(&self.batch) {
+            return Err(format!("cpg.batch must be in 1..=65536, got {}", self.batch));
+        }
+        for (key, v) in [("cpg.lr", self.lr), ("cpg.clip", self.clip)] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(format!("{key} must be a positive number, got {v}"));
+            }
+        }
+        for (key, v) in [
+            ("cpg.pg_weight", self.pg_weight),
+            ("cpg.epsilon", self.epsilon),
+            ("cpg.lambda_lr", self.lambda_lr),
+            ("cpg.lambda_init", self.lambda_init),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(format!("{key} must be a non-negative number, got {v}"));
+            }
+        }
+        self.semantics.validate().map_err(|e| format!("cpg.semantics: {e}"))
+    }
+}
+
 /// What one update measured.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct UpdateStats {
@@ -322,6 +347,7 @@ pub fn seeded_init(varmap: &VarMap, seed: u64) -> Result<()> {
 impl PlanTrainer {
     /// A fresh planner for `task`.
     pub fn new(task: Task, cfg: CpgConfig) -> Result<Self> {
+        cfg.validate().map_err(candle_core::Error::msg)?;
         let varmap = VarMap::new();
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
         let planner = PathPlanner::new(

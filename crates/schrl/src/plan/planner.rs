@@ -79,6 +79,22 @@ impl PlannerConfig {
     pub fn reference(dim: usize) -> Self {
         Self { dim, hidden: 64, bound: 10.0, min_std: 0.1, kind: PlannerKind::GruOde }
     }
+
+    /// Checks the shape and scales, naming the first bad field.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if !(1..=3).contains(&self.dim) {
+            return Err(format!("dim: {} is not a plan dimension (1 to 3)", self.dim));
+        }
+        if !(1..=4096).contains(&self.hidden) {
+            return Err(format!("hidden: {} is not a hidden size in 1..=4096", self.hidden));
+        }
+        for (key, v) in [("bound", self.bound), ("min_std", self.min_std)] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(format!("{key}: {v} must be a positive number"));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Sampled paths and their log-probabilities.
@@ -114,6 +130,7 @@ const HALF_LN_TAU: f64 = 0.918_938_533_204_672_8; // ½ ln 2π
 impl PathPlanner {
     /// A planner with parameters in `vb`.
     pub fn new(cfg: PlannerConfig, vb: VarBuilder) -> Result<Self> {
+        cfg.validate().map_err(candle_core::Error::msg)?;
         let core = match cfg.kind {
             PlannerKind::GruOde | PlannerKind::Gru => {
                 Core::Gru(gru(cfg.dim, cfg.hidden, GRUConfig::default(), vb.pp("gru"))?)

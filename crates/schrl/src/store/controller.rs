@@ -84,9 +84,16 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<ControlTrainer, StoreError> {
         .map_err(|e| invalid(&weights, e.to_string()))?;
     let get = |name: &str| -> Result<Vec<f32>, StoreError> {
         let t = tensors.get(name).ok_or_else(|| invalid(&weights, format!("no tensor '{name}'")))?;
-        t.flatten_all()
+        let v = t
+            .flatten_all()
             .and_then(|t| t.to_vec1::<f32>())
-            .map_err(|e| invalid(&weights, format!("{name}: {e}")))
+            .map_err(|e| invalid(&weights, format!("{name}: {e}")))?;
+        match v.iter().find(|x| !x.is_finite()) {
+            Some(x) => {
+                Err(invalid(&weights, format!("tensor '{name}' holds {x}: the weights are not usable")))
+            }
+            None => Ok(v),
+        }
     };
     let mut policy =
         ActorCritic::new(state.obs_dim, state.act_dim, &state.config.ppo.hidden, &mut rand::rng());

@@ -19,9 +19,19 @@ use crate::task::Task;
 
 const STATE: &str = "joint.json";
 
+/// The layout of `joint.json` this build writes and reads (files written before the
+/// field existed are this layout).
+const STATE_FORMAT: u32 = 1;
+
+fn first_format() -> u32 {
+    1
+}
+
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct State {
+    #[serde(default = "first_format")]
+    format: u32,
     task_toml: String,
     task_spec: String,
     joint: JointConfig,
@@ -39,6 +49,7 @@ pub fn save_into(files: &mut SaveFiles, t: &JointTrainer) -> Result<(), StoreErr
     planner::save_weights(files, &t.plan)?;
     controller::save_into(files, &t.control)?;
     let state = State {
+        format: STATE_FORMAT,
         task_toml: t.task.toml.clone(),
         task_spec: t.task.spec.clone(),
         joint: t.config.clone(),
@@ -57,6 +68,12 @@ pub fn save_into(files: &mut SaveFiles, t: &JointTrainer) -> Result<(), StoreErr
 pub fn load_from(ckpt: &Checkpoint) -> Result<JointTrainer, StoreError> {
     let state: State = ckpt.json(STATE)?;
     let path = ckpt.path_of(STATE);
+    if state.format != STATE_FORMAT {
+        return Err(invalid(
+            &path,
+            format!("format {} is not {STATE_FORMAT}, the joint-run state this schrl reads", state.format),
+        ));
+    }
     let task = Task::from_texts(&path, &state.task_toml, &path, &state.task_spec)
         .map_err(|e| invalid(&path, format!("task: {}", e.message)))?;
     let control = controller::load_from(ckpt)?;

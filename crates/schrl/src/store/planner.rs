@@ -120,6 +120,7 @@ pub fn load(dir: &Path) -> Result<LoadedPlanner, StoreError> {
     let mut varmap = varmap;
     let weights = ckpt.file(WEIGHTS)?;
     varmap.load(&weights).map_err(|e| invalid(&weights, e.to_string()))?;
+    check_finite(&varmap, &weights)?;
     Ok(LoadedPlanner { planner, varmap, task, meta })
 }
 
@@ -145,7 +146,24 @@ pub(crate) fn restore_trainer(
 ) -> Result<(), StoreError> {
     let weights = ckpt.file(WEIGHTS)?;
     trainer.load_weights(&weights).map_err(|e| invalid(&weights, e.to_string()))?;
+    check_finite(trainer.varmap(), &weights)?;
     trainer.restore_state(state).map_err(|e| invalid(&weights, e.to_string()))
+}
+
+/// Refuses weights holding NaN or ±∞: a planner of them plans nothing, and once
+/// evaluated as "satisfaction 0" without a word.
+fn check_finite(varmap: &VarMap, weights: &Path) -> Result<(), StoreError> {
+    let data = varmap.data().lock().map_err(|_| invalid(weights, "weights are being written elsewhere"))?;
+    for (name, var) in data.iter() {
+        let values: Vec<f32> = var
+            .flatten_all()
+            .and_then(|t| t.to_vec1())
+            .map_err(|e| invalid(weights, format!("{name}: {e}")))?;
+        if let Some(v) = values.iter().find(|v| !v.is_finite()) {
+            return Err(invalid(weights, format!("tensor '{name}' holds {v}: the weights are not usable")));
+        }
+    }
+    Ok(())
 }
 
 /// Writes the planner weights alone (a joint run keeps the state in its own file).

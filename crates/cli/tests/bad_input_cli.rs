@@ -1,0 +1,73 @@
+//! Bad input found by trying the binary as a new user would: each is a clear message
+//! and a non-zero exit, never a panic, an unbounded allocation or a half-made run.
+
+use std::process::{Command, Output};
+
+fn schrl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_schrl")).env("RAYON_NUM_THREADS", "1").args(args).output().expect("runs")
+}
+
+fn fails_with(args: &[&str], needle: &str) {
+    let o = schrl(args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "should fail: {args:?}");
+    assert!(err.contains(needle), "stderr of {args:?} lacks '{needle}':\n{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+fn temp(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("schrl-bad-input-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn counts_that_would_allocate_without_bound_are_refused_by_flag() {
+    // Regressions: `--n 0` panicked inside candle, `--n 3000000` aborted on allocation,
+    // `--rollout 18446744073709551615` grew to gigabytes.
+    fails_with(&["plan", "sample", "--ckpt", "x", "--n", "0"], "--n <N>': 0 is outside 1..=100000");
+    fails_with(&["plan", "sample", "--ckpt", "x", "--n", "3000000"], "outside 1..=100000");
+    let out = temp("r.png");
+    let out = out.to_str().unwrap();
+    fails_with(
+        &["sim", "render", "--robot", "point", "--out", out, "--rollout", "18446744073709551615"],
+        "--rollout",
+    );
+    fails_with(&["eval", "--ckpt", "x", "--per-group", "0"], "--per-group");
+}
+
+#[test]
+fn bad_training_numbers_are_named_before_a_run_directory_is_made() {
+    for (flag, value, needle) in [
+        ("--lambda-lr", "nan", "--lambda-lr must be a non-negative number, got NaN"),
+        ("--pg-weight", "inf", "--pg-weight must be a non-negative number, got inf"),
+        ("--semantics", "soft:0", "alpha"),
+    ] {
+        let dir = temp(&format!("run{}", flag.trim_start_matches('-')));
+        fails_with(&["train", "--task", "seq", flag, value, "--out", dir.to_str().unwrap()], needle);
+        assert!(!dir.exists(), "{flag} {value} left {}", dir.display());
+    }
+    let dir = temp("planrun");
+    fails_with(
+        &["plan", "train", "--task", "seq", "--semantics", "lse:-1", "--out", dir.to_str().unwrap()],
+        "temperature",
+    );
+    assert!(!dir.exists());
+}
+
+#[test]
+fn task_files_without_end_or_sense_are_refused_by_file_and_key() {
+    fails_with(&["task", "check", "/dev/zero"], "/dev/zero: cannot read: larger than 1024 KiB");
+    let toml = temp("c.toml");
+    let keys = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/tasks/keys.toml");
+    let text = std::fs::read_to_string(keys).unwrap().replace("keys.stl", "c.stl");
+    std::fs::write(&toml, &text).unwrap();
+    // Regression: a spec that is only `true` panicked in training.
+    std::fs::write(temp("c.stl"), "true\n").unwrap();
+    fails_with(&["task", "check", toml.to_str().unwrap()], "c.stl: the spec names no goal");
+    fails_with(&["train", "--task", toml.to_str().unwrap(), "--out", temp("t").to_str().unwrap()], "constant");
+    // Regression: a million waypoints passed `task check` and asked for 16 GB.
+    std::fs::write(temp("c.stl"), "F[1,2] key_a\n").unwrap();
+    std::fs::write(&toml, text.replace("steps = 6", "steps = 1000000")).unwrap();
+    fails_with(&["task", "check", toml.to_str().unwrap()], "c.toml: steps: 1000000 waypoints");
+}
