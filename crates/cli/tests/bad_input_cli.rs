@@ -65,7 +65,10 @@ fn task_files_without_end_or_sense_are_refused_by_file_and_key() {
     // Regression: a spec that is only `true` panicked in training.
     std::fs::write(temp("c.stl"), "true\n").unwrap();
     fails_with(&["task", "check", toml.to_str().unwrap()], "c.stl: the spec names no goal");
-    fails_with(&["train", "--task", toml.to_str().unwrap(), "--out", temp("t").to_str().unwrap()], "constant");
+    fails_with(
+        &["train", "--task", toml.to_str().unwrap(), "--out", temp("t").to_str().unwrap()],
+        "constant",
+    );
     // Regression: a million waypoints passed `task check` and asked for 16 GB.
     std::fs::write(temp("c.stl"), "F[1,2] key_a\n").unwrap();
     std::fs::write(&toml, text.replace("steps = 6", "steps = 1000000")).unwrap();

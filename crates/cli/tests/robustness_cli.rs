@@ -127,6 +127,20 @@ fn inputs_without_end_starts_past_the_end_and_overwriting_the_input_are_refused(
     // `true` is +∞ in STL, not the library's finite stand-in.
     assert_eq!(last_line(&schrl(&["robustness", "--spec", "true", "--trace", ok])), "inf");
     assert_eq!(last_line(&schrl(&["robustness", "--spec", "false | x > 5", "--trace", ok])), "-5");
+    // Until: standard by default (φ from t), the paper's reading (φ from t+a) on request.
+    let tr = write("until.csv", "x\n-1\n2\n3\n7\n");
+    let until = |rule: &str| {
+        last_line(&schrl(&[
+            "robustness",
+            "--spec",
+            "x > 0 U[1,3] x > 5",
+            "--trace",
+            tr.to_str().unwrap(),
+            "--until",
+            rule,
+        ]))
+    };
+    assert_eq!((until("standard"), until("paper")), ("-1".to_string(), "2".to_string()));
     // A byte-order mark before the spec is not a syntax error.
     let bom = write("bom.stl", "\u{feff}F x > 0\n");
     let spec = format!("@{}", bom.display());

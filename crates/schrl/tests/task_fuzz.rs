@@ -56,8 +56,8 @@ fn mutated_toml() -> impl Strategy<Value = String> {
 fn spec_text() -> impl Strategy<Value = String> {
     let pieces = [
         "F", "G", "X", "U", "!", "&", "|", "->", "(", ")", "[1,2]", "[0,6]", "[3,1]", "[0,inf]", "[1,7]",
-        "key_a", "key_b", "home", "hazard", "safe", "true", "false", "counter", "x", ">", "0.5", "nan", "\u{feff}",
-        "#c\n", "\n",
+        "key_a", "key_b", "home", "hazard", "safe", "true", "false", "counter", "x", ">", "0.5", "nan",
+        "\u{feff}", "#c\n", "\n",
     ];
     proptest::collection::vec(proptest::sample::select(pieces.to_vec()), 0..24).prop_map(|v| v.join(" "))
 }

@@ -49,7 +49,7 @@ pub mod tensor;
 
 pub use formula::{CmpOp, Formula, Interval};
 pub use predicate::{AfterStep, AvoidBoxes, AxisBox, Ball, FnPredicate, Halfspace, Predicate};
-pub use program::{Atom, Program, Workspace};
+pub use program::{Atom, Program, UntilRule, Workspace};
 pub use semantics::{Semantics, SemanticsError, Smoothing};
 pub use spec::{EvalError, Evaluator, Spec, SpecBuilder, SpecError};
 pub use syntax::{ParseError, is_valid_name, locate_name, parse};

@@ -46,6 +46,43 @@ impl Atom {
     }
 }
 
+/// Where `φ U[a,b] ψ` requires φ before the step `k ∈ [t+a, t+b]` at which ψ holds.
+/// The two readings differ only when `a > 0`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum UntilRule {
+    /// On `[t, k−1]`: standard discrete-time STL (Maler and Nickovic; rtamt), the
+    /// library's default. Compiled as `G[0,a−1] φ ∧ (φ U[a,b] ψ)` under the paper's
+    /// reading (exact in hard semantics: the prefix does not depend on `k`), the `∧`
+    /// smoothed as the temporal operators are.
+    #[default]
+    Standard,
+    /// On `[t+a, k−1]`: the paper's App. C, which the shipped tasks are written for
+    /// (Signal: `… U[1,T] counter` does not ask the start to be at a corner).
+    Paper,
+}
+
+impl UntilRule {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            UntilRule::Standard => "standard",
+            UntilRule::Paper => "paper",
+        }
+    }
+}
+
+impl std::str::FromStr for UntilRule {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "standard" => Ok(UntilRule::Standard),
+            "paper" => Ok(UntilRule::Paper),
+            other => Err(format!("'{other}' is not an until rule: expected standard or paper")),
+        }
+    }
+}
+
 #[derive(Clone, Debug)]
 enum Op {
     Const(bool),
@@ -53,6 +90,9 @@ enum Op {
     Not(usize),
     And(Vec<usize>),
     Or(Vec<usize>),
+    /// A conjunction smoothed as the temporal operators are (the standard until's
+    /// prefix with the paper's until).
+    TemporalAnd(Vec<usize>),
     Next(usize),
     Eventually(Interval, usize),
     Globally(Interval, usize),
@@ -65,13 +105,20 @@ enum Op {
 pub struct Program {
     ops: Vec<Op>,
     atoms: Vec<Atom>,
+    until: UntilRule,
 }
 
 impl Program {
-    /// Compiles `formula`. Identical atoms share one column, identical sub-formulas
-    /// one node (the Loop task names each goal three times); `φ ⇒ ψ` becomes `¬φ ∨ ψ`.
+    /// Compiles `formula` with the standard until ([`UntilRule::Standard`]).
     pub fn compile(formula: &Formula) -> Self {
-        let mut p = Program { ops: Vec::new(), atoms: Vec::new() };
+        Self::compile_with(formula, UntilRule::Standard)
+    }
+
+    /// Compiles `formula`, reading `U` by `until`. Identical atoms share one column,
+    /// identical sub-formulas one node (the Loop task names each goal three times);
+    /// `φ ⇒ ψ` becomes `¬φ ∨ ψ`.
+    pub fn compile_with(formula: &Formula, until: UntilRule) -> Self {
+        let mut p = Program { ops: Vec::new(), atoms: Vec::new(), until };
         let mut index: HashMap<String, usize> = HashMap::new();
         let mut shared: HashMap<String, usize> = HashMap::new();
         p.emit(formula, &mut index, &mut shared);
@@ -141,7 +188,15 @@ impl Program {
             Formula::Globally(iv, c) => Op::Globally(*iv, self.emit(c, index, shared)),
             Formula::Until(iv, l, r) => {
                 let l = self.emit(l, index, shared);
-                Op::Until(*iv, l, self.emit(r, index, shared))
+                let until = Op::Until(*iv, l, self.emit(r, index, shared));
+                if self.until == UntilRule::Paper || iv.start == 0 {
+                    until
+                } else {
+                    self.ops.push(until);
+                    let u = self.ops.len() - 1;
+                    self.ops.push(Op::Globally(Interval::bounded(0, iv.start - 1), l));
+                    Op::TemporalAnd(vec![self.ops.len() - 1, u])
+                }
             }
         };
         self.ops.push(op);
@@ -151,6 +206,11 @@ impl Program {
     /// The predicate columns, in column order.
     pub fn atoms(&self) -> &[Atom] {
         &self.atoms
+    }
+
+    /// How `U` was read.
+    pub fn until_rule(&self) -> UntilRule {
+        self.until
     }
 
     /// Number of compiled nodes.
@@ -201,9 +261,8 @@ impl Program {
                         *o = -x;
                     }
                 }
-                Op::And(cs) | Op::Or(cs) => {
-                    let dir = if matches!(op, Op::And(_)) { Dir::Min } else { Dir::Max };
-                    let agg = Agg::new(logic, dir);
+                Op::And(cs) | Op::Or(cs) | Op::TemporalAnd(cs) => {
+                    let agg = nary_agg(op, logic, temporal);
                     nary_forward(agg, cs, done, n, out, logw, &mut ws.operands);
                 }
                 Op::Next(c) => {
@@ -264,9 +323,8 @@ impl Program {
                         *a -= gi;
                     }
                 }
-                op @ (Op::And(cs) | Op::Or(cs)) => {
-                    let dir = if matches!(op, Op::And(_)) { Dir::Min } else { Dir::Max };
-                    let agg = Agg::new(logic, dir);
+                op @ (Op::And(cs) | Op::Or(cs) | Op::TemporalAnd(cs)) => {
+                    let agg = nary_agg(op, logic, temporal);
                     let out = sig(i);
                     let mut gv = std::mem::take(&mut ws.operand_grads);
                     for tt in 0..n {
@@ -336,6 +394,16 @@ impl Program {
                 }
             }
         }
+    }
+}
+
+/// The aggregation of an n-ary node: and/or smoothed as the logic is, the until's
+/// conjunction as the temporal operators are.
+fn nary_agg(op: &Op, logic: crate::semantics::Smoothing, temporal: crate::semantics::Smoothing) -> Agg {
+    match op {
+        Op::And(_) => Agg::new(logic, Dir::Min),
+        Op::TemporalAnd(_) => Agg::new(temporal, Dir::Min),
+        _ => Agg::new(logic, Dir::Max),
     }
 }
 

@@ -20,7 +20,7 @@ use std::sync::Arc;
 
 use crate::formula::Formula;
 use crate::predicate::{Predicate, Shifted, SignalCompare};
-use crate::program::{Atom, Program, Workspace};
+use crate::program::{Atom, Program, UntilRule, Workspace};
 use crate::semantics::{Semantics, SemanticsError};
 
 /// A problem found while binding a formula's names.
@@ -144,6 +144,7 @@ pub(crate) fn resolve<P: ?Sized>(
 /// Builds a [`Spec`]: names the state's signals and binds predicate names.
 pub struct SpecBuilder {
     formula: Formula,
+    until: UntilRule,
     signals: Vec<String>,
     state_dim: Option<usize>,
     bindings: HashMap<String, Box<dyn Predicate>>,
@@ -164,6 +165,12 @@ impl SpecBuilder {
         self
     }
 
+    /// How `U` is read (default: [`UntilRule::Standard`]).
+    pub fn until(mut self, rule: UntilRule) -> Self {
+        self.until = rule;
+        self
+    }
+
     /// Binds `name` to a predicate.
     pub fn bind(mut self, name: impl Into<String>, predicate: impl Predicate + 'static) -> Self {
         self.bindings.insert(name.into(), Box::new(predicate));
@@ -177,7 +184,7 @@ impl SpecBuilder {
 
     /// Checks every name and builds the spec.
     pub fn build(mut self) -> Result<Spec, SpecError> {
-        let program = Program::compile(&self.formula);
+        let program = Program::compile_with(&self.formula, self.until);
         let state_dim = self.state_dim.unwrap_or_else(|| {
             if self.signals.is_empty() {
                 self.bindings.values().map(|p| p.required_dim()).max().unwrap_or(0)
@@ -258,7 +265,13 @@ impl std::fmt::Debug for Spec {
 impl Spec {
     /// Starts binding `formula`.
     pub fn builder(formula: Formula) -> SpecBuilder {
-        SpecBuilder { formula, signals: Vec::new(), state_dim: None, bindings: HashMap::new() }
+        SpecBuilder {
+            formula,
+            until: UntilRule::default(),
+            signals: Vec::new(),
+            state_dim: None,
+            bindings: HashMap::new(),
+        }
     }
 
     /// The formula.

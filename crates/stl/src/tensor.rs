@@ -32,7 +32,7 @@ use candle_core::{CpuStorage, CustomOp1, DType, Layout, Shape, Tensor};
 
 use crate::formula::Formula;
 use crate::predicate::Predicate;
-use crate::program::{Program, Workspace};
+use crate::program::{Program, UntilRule, Workspace};
 use crate::semantics::Semantics;
 use crate::spec::{Resolved, SpecError, resolve};
 
@@ -207,6 +207,7 @@ enum Column {
 /// Builds a [`TensorSpec`].
 pub struct TensorSpecBuilder {
     formula: Formula,
+    until: UntilRule,
     state_dim: usize,
     signals: Vec<String>,
     bindings: HashMap<String, Box<dyn TensorPredicate>>,
@@ -216,6 +217,12 @@ impl TensorSpecBuilder {
     /// Names the state dimensions, in order (for comparisons such as `x > 0.5`).
     pub fn signals<S: Into<String>>(mut self, names: impl IntoIterator<Item = S>) -> Self {
         self.signals = names.into_iter().map(Into::into).collect();
+        self
+    }
+
+    /// How `U` is read (default: [`UntilRule::Standard`]).
+    pub fn until(mut self, rule: UntilRule) -> Self {
+        self.until = rule;
         self
     }
 
@@ -237,7 +244,7 @@ impl TensorSpecBuilder {
 
     /// Checks every name and builds the spec.
     pub fn build(self) -> Result<TensorSpec, SpecError> {
-        let program = Program::compile(&self.formula);
+        let program = Program::compile_with(&self.formula, self.until);
         if self.signals.len() > self.state_dim {
             return Err(SpecError::Dimension {
                 name: "signals".into(),
@@ -287,7 +294,13 @@ pub struct TensorSpec {
 impl TensorSpec {
     /// Starts binding `formula` for paths whose states have `state_dim` numbers.
     pub fn builder(formula: Formula, state_dim: usize) -> TensorSpecBuilder {
-        TensorSpecBuilder { formula, state_dim, signals: Vec::new(), bindings: HashMap::new() }
+        TensorSpecBuilder {
+            formula,
+            until: UntilRule::default(),
+            state_dim,
+            signals: Vec::new(),
+            bindings: HashMap::new(),
+        }
     }
 
     /// The formula.

@@ -132,6 +132,7 @@ fn batches_equal_single_paths() {
 fn until_a_counter_passes_the_gradient_of_a_badly_violated_left_side() {
     let until = |truth: f64| {
         Spec::builder(parse("x > 0 U[1,3] counter").unwrap())
+            .until(stl::UntilRule::Paper)
             .signals(["x"])
             .bind("counter", AfterStep { step: 3, truth })
             .build()

@@ -5,7 +5,7 @@ mod common;
 
 use common::{bind, formula, path, reference, semantics};
 use proptest::prelude::*;
-use stl::{Formula, Semantics, parse};
+use stl::{Formula, Semantics, UntilRule, parse};
 
 fn close(a: f64, b: f64, tol: f64) -> bool {
     (a - b).abs() <= tol * (1.0 + a.abs().max(b.abs()))
@@ -17,12 +17,17 @@ proptest! {
     /// The O(T) evaluator equals the direct definitions, in every mode and at every
     /// start time.
     #[test]
-    fn forward_matches_definition(f in formula(), p in path(), sem in semantics()) {
-        let spec = bind(f.clone());
+    fn forward_matches_definition(
+        f in formula(),
+        p in path(),
+        sem in semantics(),
+        rule in prop_oneof![Just(UntilRule::Standard), Just(UntilRule::Paper)],
+    ) {
+        let spec = common::bind_with(f.clone(), rule);
         let signal = spec.robustness_signal(&p, &sem).unwrap();
         for (t, got) in signal.iter().enumerate() {
-            let want = reference(&f, &p, t, &sem);
-            prop_assert!(close(*got, want, 1e-9), "t={t} {f}: got {got}, want {want}");
+            let want = common::reference_with(&f, &p, t, &sem, rule);
+            prop_assert!(close(*got, want, 1e-9), "t={t} {f} ({rule:?}): got {got}, want {want}");
         }
     }
 
@@ -140,21 +145,30 @@ fn eventually_and_globally_windows() {
 }
 
 #[test]
-fn until_follows_app_c() {
-    // φ = x > 0, ψ = x > 5; φ must hold on [a, k−1] before ψ at k.
+fn until_follows_app_c_when_asked() {
+    // φ = x > 0, ψ = x > 5; the paper asks φ on [a, k−1] before ψ at k.
     let x = [-1.0, 2.0, 3.0, 7.0, 1.0];
+    let paper = common::bind_with(parse("x > 0 U[1,3] x > 5").unwrap(), UntilRule::Paper);
     // k=1: min(ψ1=-3) ; k=2: min(ψ2=-2, φ1=2) = -2; k=3: min(ψ3=2, φ1=2, φ2=3) = 2.
-    let (r, g) = hard("x > 0 U[1,3] x > 5", &x);
+    let (r, g) = paper.gradient(&xs(&x), &Semantics::hard()).unwrap();
     assert_eq!(r, 2.0);
-    assert_eq!(g, vec![0.0, 0.0, 0.0, 1.0, 0.0], "ties go to the ψ side");
-    // Starting the window at 0 makes φ_0 = −1 binding for k ≥ 1; ψ_0 = −6.
+    assert_eq!(
+        g.iter().step_by(2).copied().collect::<Vec<_>>(),
+        vec![0.0, 0.0, 0.0, 1.0, 0.0],
+        "ties go to ψ"
+    );
+    // The standard reading also asks φ at t itself: φ_0 = −1 binds.
+    assert_eq!(hard("x > 0 U[1,3] x > 5", &x), (-1.0, vec![1.0, 0.0, 0.0, 0.0, 0.0]));
+    // With the window starting at 0 the two agree.
     assert_eq!(hard("x > 0 U[0,3] x > 5", &x), (-1.0, vec![1.0, 0.0, 0.0, 0.0, 0.0]));
     // The soft modes agree with the definitions on the same example.
-    let spec = common::bind(parse("x > 0 U[1,3] x > 5").unwrap());
-    for sem in [Semantics::soft(2.0), Semantics::lse(0.5)] {
-        let got = spec.robustness(&xs(&x), &sem).unwrap();
-        let want = common::reference(spec.formula(), &xs(&x), 0, &sem);
-        assert!((got - want).abs() < 1e-12);
+    for rule in [UntilRule::Standard, UntilRule::Paper] {
+        let spec = common::bind_with(parse("x > 0 U[1,3] x > 5").unwrap(), rule);
+        for sem in [Semantics::soft(2.0), Semantics::lse(0.5)] {
+            let got = spec.robustness(&xs(&x), &sem).unwrap();
+            let want = common::reference_with(spec.formula(), &xs(&x), 0, &sem, rule);
+            assert!((got - want).abs() < 1e-12);
+        }
     }
 }
 

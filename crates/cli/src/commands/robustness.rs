@@ -36,6 +36,10 @@ pub struct Args {
     /// Smooth only and/or/implies; keep eventually/globally/until hard.
     #[arg(long)]
     smooth_logic_only: bool,
+    /// Where `φ U[a,b] ψ` asks for φ: standard (from t, as rtamt and Maler–Nickovic) or
+    /// paper (from t+a, the paper's App. C, which the shipped tasks use).
+    #[arg(long, default_value = "standard")]
+    until: stl::UntilRule,
     /// Start step at which robustness is evaluated.
     #[arg(long, default_value_t = 0)]
     at: usize,
@@ -119,7 +123,11 @@ pub fn run(args: Args) -> Result<()> {
     let text = SpecText::load(spec)?;
     let formula = text.parse()?;
     let trace = read_trace(trace_path)?;
-    let spec = Spec::builder(formula).signals(trace.names.clone()).build().map_err(|e| text.explain(e))?;
+    let spec = Spec::builder(formula)
+        .until(args.until)
+        .signals(trace.names.clone())
+        .build()
+        .map_err(|e| text.explain(e))?;
     let mut sem = args.semantics;
     if args.smooth_logic_only {
         sem = sem.logic_only();

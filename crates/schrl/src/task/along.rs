@@ -249,9 +249,10 @@ impl ExecutionSpec {
             .predicates()
             .into_iter()
             .chain(columns)
-            .fold(Spec::builder(task.planning_formula()).state_dim(dim + regions.len()), |b, (n, p)| {
-                b.bind_shared(n, p)
-            })
+            .fold(
+                Spec::builder(task.planning_formula()).state_dim(dim + regions.len()).until(super::UNTIL),
+                |b, (n, p)| b.bind_shared(n, p),
+            )
             .build()
             .expect("task names are checked when the task is loaded");
         Self { spec, regions, dim, steps: task.steps }

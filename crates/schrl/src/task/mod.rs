@@ -534,7 +534,9 @@ impl Task {
         self.predicates()
             .into_iter()
             .chain(along::planning_bindings(self))
-            .fold(Spec::builder(self.planning_formula()).state_dim(dim), |b, (n, p)| b.bind_shared(n, p))
+            .fold(Spec::builder(self.planning_formula()).state_dim(dim).until(UNTIL), |b, (n, p)| {
+                b.bind_shared(n, p)
+            })
             .build()
             .expect("task names are checked when the task is loaded")
     }
@@ -556,7 +558,7 @@ impl Task {
         self.predicates()
             .into_iter()
             .chain(along::planning_bindings(self))
-            .fold(TensorSpec::builder(self.planning_formula(), dim), |b, (n, p)| {
+            .fold(TensorSpec::builder(self.planning_formula(), dim).until(UNTIL), |b, (n, p)| {
                 b.bind_shared_predicate(n, p)
             })
             .build()
@@ -686,6 +688,10 @@ pub fn read_text(path: &Path, limit: u64) -> std::io::Result<String> {
     }
     Ok(text.strip_prefix('\u{feff}').map(str::to_string).unwrap_or(text))
 }
+
+/// How tasks read `U`: as the paper's App. C, which their specs are written for (the
+/// Signal task's `… U[1,T] counter` does not ask the start to be at a corner).
+pub const UNTIL: stl::UntilRule = stl::UntilRule::Paper;
 
 /// The most waypoints a task's plan may have: far above every shipped task (20), far
 /// below what makes allocating a batch of plans fail (`steps = 1000000` once asked for

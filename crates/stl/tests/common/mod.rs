@@ -4,13 +4,19 @@
 #![allow(dead_code)]
 
 use proptest::prelude::*;
-use stl::{Ball, Formula, Halfspace, Interval, Semantics, Smoothing, Spec};
+use stl::{Ball, Formula, Halfspace, Interval, Semantics, Smoothing, Spec, UntilRule};
 
 pub const SIGNALS: [&str; 2] = ["x", "y"];
 
 /// Binds `a`, `b`, `c` (and the signals `x`, `y`) for 2-D paths.
 pub fn bind(f: Formula) -> Spec {
+    bind_with(f, UntilRule::Standard)
+}
+
+/// [`bind`] with `U` read by `rule`.
+pub fn bind_with(f: Formula, rule: UntilRule) -> Spec {
     Spec::builder(f)
+        .until(rule)
         .signals(SIGNALS)
         .bind("a", Ball::new([1.0, 0.0], 0.5))
         .bind("b", Ball::new([0.0, 1.0], 0.7))
@@ -95,8 +101,17 @@ fn agg(sm: Smoothing, max: bool, v: &[f64]) -> f64 {
     }
 }
 
-/// ρ(f, t) on a 2-D path, evaluated by the definitions, for checking the fast code.
+/// ρ(f, t) on a 2-D path, evaluated by the definitions (standard until), for
+/// checking the fast code.
 pub fn reference(f: &Formula, path: &[f64], t: usize, sem: &Semantics) -> f64 {
+    reference_with(f, path, t, sem, UntilRule::Standard)
+}
+
+/// [`reference`] with `U` read by `rule`: the paper's φ on `[t+a, k−1]`, or the
+/// standard φ on `[t, k−1]` written as `G[0,a−1] φ ∧` the paper's until.
+pub fn reference_with(f: &Formula, path: &[f64], t: usize, sem: &Semantics, rule: UntilRule) -> f64 {
+    let reference =
+        |f: &Formula, path: &[f64], t: usize, sem: &Semantics| reference_with(f, path, t, sem, rule);
     let n = path.len() / 2;
     let last = n - 1;
     let clamp = |k: usize| k.min(last);
@@ -148,7 +163,12 @@ pub fn reference(f: &Formula, path: &[f64], t: usize, sem: &Semantics) -> f64 {
                     agg(temporal, false, &inner)
                 })
                 .collect();
-            agg(temporal, true, &terms)
+            let paper = agg(temporal, true, &terms);
+            if rule == UntilRule::Paper || i.start == 0 {
+                return paper;
+            }
+            let before = Formula::Globally(Interval::bounded(0, i.start - 1), l.clone());
+            agg(temporal, false, &[reference(&before, path, t, sem), paper])
         }
     }
 }
