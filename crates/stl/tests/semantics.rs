@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{bind, formula, path, reference, semantics};
+use common::{bind, formula, path, semantics};
 use proptest::prelude::*;
 use stl::{Formula, Semantics, UntilRule, parse};
 
