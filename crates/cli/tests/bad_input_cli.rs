@@ -71,6 +71,6 @@ fn task_files_without_end_or_sense_are_refused_by_file_and_key() {
     );
     // Regression: a million waypoints passed `task check` and asked for 16 GB.
     std::fs::write(temp("c.stl"), "F[1,2] key_a\n").unwrap();
-    std::fs::write(&toml, text.replace("steps = 8", "steps = 1000000")).unwrap();
+    std::fs::write(&toml, text.replace("steps = 6", "steps = 1000000")).unwrap();
     fails_with(&["task", "check", toml.to_str().unwrap()], "c.toml: steps: 1000000 waypoints");
 }

@@ -253,8 +253,8 @@ fn joint_train_resume_and_eval_end_to_end() {
             "a position per step and the start"
         );
         assert!(positions.iter().all(|p| p.as_array().unwrap().len() == 2));
-        assert_eq!(r["waypoints"].as_array().unwrap().len(), 9, "the start and 8 waypoints");
-        assert!(r["reached_at"].as_array().unwrap().len() <= 8);
+        assert_eq!(r["waypoints"].as_array().unwrap().len(), 7, "the start and 6 waypoints");
+        assert!(r["reached_at"].as_array().unwrap().len() <= 6);
     }
     // Kept without --force.
     let o = eval_keys(&[]);

@@ -7,7 +7,7 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use stl::{Ball, Formula, Semantics, Spec};
+use stl::{Ball, Formula, Semantics, Spec, parse};
 
 mod point_tasks;
 use point_tasks::{point_tasks, random_paths};
@@ -79,6 +79,30 @@ fn path_length(c: &mut Criterion) {
     g.finish();
 }
 
+/// An unbounded `until` over growing paths, robustness and gradient: O(T) in every
+/// mode (a per-window scan was quadratic in the smooth ones).
+fn until_length(c: &mut Criterion) {
+    let mut g = c.benchmark_group("until_length");
+    let spec = Spec::builder(parse("x > 0 U y > 2.999").unwrap()).signals(["x", "y"]).build().unwrap();
+    for steps in [1_000usize, 10_000, 30_000] {
+        let path = random_paths(1, steps, 7);
+        let mut grad = vec![0.0; path.len()];
+        g.throughput(Throughput::Elements(steps as u64));
+        for (mode, sem) in
+            [("hard", Semantics::hard()), ("soft2", Semantics::soft(2.0)), ("lse", Semantics::lse(0.5))]
+        {
+            let mut ev = spec.evaluator();
+            g.bench_function(BenchmarkId::new(mode, steps), |b| {
+                b.iter(|| {
+                    grad.fill(0.0);
+                    black_box(ev.gradient(&path, 0, &sem, &mut grad).unwrap())
+                })
+            });
+        }
+    }
+    g.finish();
+}
+
 /// Formula size: a conjunction of k reach clauses over 64 steps.
 fn formula_size(c: &mut Criterion) {
     let mut g = c.benchmark_group("formula_size");
@@ -108,6 +132,6 @@ fn formula_size(c: &mut Criterion) {
 criterion_group! {
     name = benches;
     config = Criterion::default().warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(2)).sample_size(30);
-    targets = one_path, batch, path_length, formula_size
+    targets = one_path, batch, path_length, until_length, formula_size
 }
 criterion_main!(benches);

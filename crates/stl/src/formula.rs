@@ -126,7 +126,8 @@ pub enum Formula {
     Eventually(Interval, Box<Formula>),
     /// `□[a,b] φ`: min over the window.
     Globally(Interval, Box<Formula>),
-    /// `φ U[a,b] ψ`: `max_{k∈[t+a,t+b]} min(ψ_k, min_{j∈[t+a,k−1]} φ_j)` (App. C).
+    /// `φ U[a,b] ψ`: `max_{k∈[t+a,t+b]} min(ψ_k, min_{j∈[s,k−1]} φ_j)`, with `s = t`
+    /// (standard) or `s = t+a` (the paper's App. C), by [`crate::UntilRule`].
     Until(Interval, Box<Formula>, Box<Formula>),
 }
 
