@@ -6,7 +6,8 @@
 use std::hint::black_box;
 use std::time::Duration;
 
-use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use criterion::measurement::WallTime;
+use criterion::{BenchmarkGroup, BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use stl::{Ball, Formula, Semantics, Spec, parse};
 
 mod point_tasks;
@@ -49,6 +50,22 @@ fn batch(c: &mut Criterion) {
     g.finish();
 }
 
+/// Robustness and gradient of `path` under `spec` in the three modes, named by `steps`.
+fn every_mode(g: &mut BenchmarkGroup<'_, WallTime>, spec: &Spec, path: &[f64], steps: usize) {
+    let mut grad = vec![0.0; path.len()];
+    for (mode, sem) in
+        [("hard", Semantics::hard()), ("soft2", Semantics::soft(2.0)), ("lse", Semantics::lse(0.5))]
+    {
+        let mut ev = spec.evaluator();
+        g.bench_function(BenchmarkId::new(mode, steps), |b| {
+            b.iter(|| {
+                grad.fill(0.0);
+                black_box(ev.gradient(path, 0, &sem, &mut grad).unwrap())
+            })
+        });
+    }
+}
+
 /// Long windows: `G[0,T] (F[0,T/2] a) & F[0,T] b` is linear in T if windows are O(T),
 /// quadratic if each window is scanned.
 fn path_length(c: &mut Criterion) {
@@ -62,19 +79,8 @@ fn path_length(c: &mut Criterion) {
             .build()
             .unwrap();
         let path = random_paths(1, steps, 3);
-        let mut grad = vec![0.0; path.len()];
         g.throughput(Throughput::Elements(steps as u64));
-        for (mode, sem) in
-            [("hard", Semantics::hard()), ("soft2", Semantics::soft(2.0)), ("lse", Semantics::lse(0.5))]
-        {
-            let mut ev = spec.evaluator();
-            g.bench_function(BenchmarkId::new(mode, steps), |b| {
-                b.iter(|| {
-                    grad.fill(0.0);
-                    black_box(ev.gradient(&path, 0, &sem, &mut grad).unwrap())
-                })
-            });
-        }
+        every_mode(&mut g, &spec, &path, steps);
     }
     g.finish();
 }
@@ -86,19 +92,8 @@ fn until_length(c: &mut Criterion) {
     let spec = Spec::builder(parse("x > 0 U y > 2.999").unwrap()).signals(["x", "y"]).build().unwrap();
     for steps in [1_000usize, 10_000, 30_000] {
         let path = random_paths(1, steps, 7);
-        let mut grad = vec![0.0; path.len()];
         g.throughput(Throughput::Elements(steps as u64));
-        for (mode, sem) in
-            [("hard", Semantics::hard()), ("soft2", Semantics::soft(2.0)), ("lse", Semantics::lse(0.5))]
-        {
-            let mut ev = spec.evaluator();
-            g.bench_function(BenchmarkId::new(mode, steps), |b| {
-                b.iter(|| {
-                    grad.fill(0.0);
-                    black_box(ev.gradient(&path, 0, &sem, &mut grad).unwrap())
-                })
-            });
-        }
+        every_mode(&mut g, &spec, &path, steps);
     }
     g.finish();
 }
