@@ -273,6 +273,24 @@ fn joint_train_resume_and_eval_end_to_end() {
     std::fs::write(&jsonl, text.replacen(first, &r.to_string(), 1)).unwrap();
     let o = rejudge();
     assert!(!o.status.success() && stderr(&o).contains("1 of 6 runs judged differently"), "{}", stderr(&o));
+    // A checkpoint whose state claims another layout is refused, even with its
+    // checksum made to match.
+    let tampered = dir.join("tampered");
+    copy_dir(&krun, &tampered);
+    let mut manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tampered.join("manifest.json")).unwrap()).unwrap();
+    let gen_dir = tampered.join(format!("gen-{}", manifest["generation"]));
+    let state = std::fs::read_to_string(gen_dir.join("joint.json")).unwrap();
+    assert!(state.starts_with("{\"format\":1,"), "{}", &state[..40]);
+    let state = state.replacen("{\"format\":1,", "{\"format\":7,", 1);
+    std::fs::write(gen_dir.join("joint.json"), &state).unwrap();
+    use sha2::Digest;
+    let digest: String = sha2::Sha256::digest(state.as_bytes()).iter().map(|b| format!("{b:02x}")).collect();
+    manifest["files"]["joint.json"]["sha256"] = digest.into();
+    manifest["files"]["joint.json"]["bytes"] = state.len().into();
+    std::fs::write(tampered.join("manifest.json"), manifest.to_string()).unwrap();
+    let o = schrl(&["eval", "--ckpt", tampered.to_str().unwrap(), "--groups", "1", "--per-group", "1"]);
+    assert!(!o.status.success() && stderr(&o).contains("joint.json: format 7 is not 1"), "{}", stderr(&o));
     // Fig. 5: the two planners' waypoints in one picture.
     let fig5 = dir.join("fig5.svg");
     let o = schrl(&["plan", "compare", "--ckpt", run_s, "--n", "2", "--out", fig5.to_str().unwrap()]);
@@ -307,6 +325,20 @@ fn joint_train_resume_and_eval_end_to_end() {
         stderr(&o)
     );
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Copies a run directory (files and one level of subdirectories).
+fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let path = entry.unwrap().path();
+        let target = to.join(path.file_name().unwrap());
+        if path.is_dir() {
+            copy_dir(&path, &target);
+        } else {
+            std::fs::copy(&path, &target).unwrap();
+        }
+    }
 }
 
 #[test]
