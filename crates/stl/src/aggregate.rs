@@ -158,7 +158,10 @@ pub struct Scratch {
     suf: Vec<Acc>,
     bpre: Vec<BAcc>,
     bsuf: Vec<BAcc>,
-    until: UntilParts,
+    terms: Vec<f64>,
+    tacc: Vec<Acc>,
+    gterm: Vec<f64>,
+    vwin: Vec<f64>,
 }
 
 /// Prefix/suffix tables of the van Herk / Gil–Werman decomposition: blocks of
@@ -236,7 +239,6 @@ fn window_len(a: usize, b: Option<usize>, n: usize) -> usize {
 // ---------------------------------------------------------------------------
 
 /// Aggregates the operand values `v`.
-#[cfg(test)]
 pub(crate) fn reduce(agg: Agg, v: &[f64]) -> f64 {
     reduce_logw(agg, v).0
 }
@@ -406,61 +408,9 @@ fn soft_window_accs(beta: f64, x: &[f64], a: usize, b: Option<usize>, sc: &mut S
 // ---------------------------------------------------------------------------
 //
 // ρ(φ U[a,b] ψ, t) = max_{k ∈ W(t)} min(ψ_k, min_{j ∈ [lo, k−1]} φ_j), W(t) = [lo, hi]
-// the clamped window (paper App. C: ψ at k, φ on [a, k−1] relative to t). A scan of
-// each window would be O(T·w), quadratic for an unbounded until. Instead, with the
-// recursion V(u) = max(ψ_u, min(φ_u, V(u+1))), V(n−1) = ψ_{n−1} (the until from u to
-// the end of the path):
-//
-//     ρ(t) = min(max_{k ∈ W(t)} ψ_k, V(lo)),
-//
-// exact in hard mode (both sides bound the max from above; if V(lo) is reached past
-// hi, φ holds on all of W(t) at that level and the window's best ψ attains it). The
-// smooth modes evaluate the same expression with each min and max smoothed: a
-// relaxation of the hard until that equals it in the limit, O(T) forward and
-// backward, with the window maximum over ψ taken by the O(T) window code.
+// the clamped window (paper App. C: ψ at k, φ on [a, k−1] relative to t).
 
-/// The recursion and window of an until over `phi`, `psi`: what the forward result
-/// and its backward pass are assembled from.
-#[derive(Default, Debug, Clone)]
-pub(crate) struct UntilParts {
-    /// `V(u)` and its log-weight (of the max over `ψ_u` and `inner[u]`).
-    v: Vec<f64>,
-    lw_v: Vec<f64>,
-    /// `min(φ_u, V(u+1))` and its log-weight (`u < n−1`).
-    inner: Vec<f64>,
-    lw_inner: Vec<f64>,
-    /// `max` of ψ over each window, and its log-weight.
-    win: Vec<f64>,
-    lw_win: Vec<f64>,
-    /// Adjoints of `V` and of the window maxima.
-    gv: Vec<f64>,
-    gwin: Vec<f64>,
-}
-
-/// `(value, log-weight)` of two operands.
-fn pair(agg: Agg, x: f64, y: f64) -> (f64, f64) {
-    reduce_logw(agg, &[x, y])
-}
-
-/// Fills `sc.until` with the recursion and the window maxima.
-fn until_parts(smoothing: Smoothing, phi: &[f64], psi: &[f64], a: usize, b: Option<usize>, sc: &mut Scratch) {
-    let n = phi.len();
-    let (smax, smin) = (Agg::new(smoothing, Dir::Max), Agg::new(smoothing, Dir::Min));
-    let mut p = std::mem::take(&mut sc.until);
-    for buf in [&mut p.v, &mut p.lw_v, &mut p.inner, &mut p.lw_inner, &mut p.win, &mut p.lw_win] {
-        buf.clear();
-        buf.resize(n, 0.0);
-    }
-    p.v[n - 1] = psi[n - 1];
-    for u in (0..n - 1).rev() {
-        (p.inner[u], p.lw_inner[u]) = pair(smin, phi[u], p.v[u + 1]);
-        (p.v[u], p.lw_v[u]) = pair(smax, psi[u], p.inner[u]);
-    }
-    window_forward(smax, psi, (a, b), &mut p.win, &mut p.lw_win, sc);
-    sc.until = p;
-}
-
-/// Forward pass of until, writing `out[t]` for every `t` in O(T).
+/// Forward pass of until, writing `out[t]` for every `t`.
 pub(crate) fn until_forward(
     smoothing: Smoothing,
     phi: &[f64],
@@ -471,18 +421,59 @@ pub(crate) fn until_forward(
     sc: &mut Scratch,
 ) {
     let n = phi.len();
-    until_parts(smoothing, phi, psi, a, b, sc);
-    let smin = Agg::new(smoothing, Dir::Min);
-    let p = &sc.until;
-    for (t, o) in out.iter_mut().enumerate() {
-        let (lo, _) = window(t, a, b, n);
-        *o = pair(smin, p.win[t], p.v[lo]).0;
+    match smoothing {
+        Smoothing::Hard => {
+            // max_k min(ψ_k, Φ[lo,k−1]) = min(max_{k∈W} ψ_k, V(lo)) with the O(n)
+            // recursion V(u) = max(ψ_u, min(φ_u, V(u+1))), V(n−1) = ψ_{n−1}.
+            let mut v = std::mem::take(&mut sc.terms);
+            until_v(phi, psi, &mut v);
+            window_forward(Agg::Hard(Dir::Max), psi, (a, b), out, &mut [], sc);
+            for (t, o) in out.iter_mut().enumerate() {
+                let (lo, _) = window(t, a, b, n);
+                *o = o.min(v[lo]);
+            }
+            sc.terms = v;
+        }
+        _ => {
+            let inner = Agg::new(smoothing, Dir::Min);
+            let outer = Agg::new(smoothing, Dir::Max);
+            for (t, o) in out.iter_mut().enumerate() {
+                soft_until_terms(inner, phi, psi, window(t, a, b, n), sc);
+                *o = reduce(outer, &sc.terms);
+            }
+        }
     }
 }
 
-/// Adds the gradient of [`until_forward`] into `gphi` and `gpsi`, in O(T). Hard-mode
-/// ties go to the window over ψ (against `V`), to `ψ_u` (against the rest of the
-/// recursion) and to `φ_u` (against `V(u+1)`).
+/// `V(u)` of the hard until recursion, for every `u`.
+fn until_v(phi: &[f64], psi: &[f64], v: &mut Vec<f64>) {
+    let n = phi.len();
+    v.clear();
+    v.resize(n, 0.0);
+    v[n - 1] = psi[n - 1];
+    for u in (0..n - 1).rev() {
+        v[u] = psi[u].max(phi[u].min(v[u + 1]));
+    }
+}
+
+/// Fills `sc.terms` (and `sc.tacc`) with the inner terms `min(ψ_k, φ_lo..φ_{k−1})`.
+fn soft_until_terms(inner: Agg, phi: &[f64], psi: &[f64], (lo, hi): (usize, usize), sc: &mut Scratch) {
+    let beta = match inner {
+        Agg::Soft { beta } | Agg::Lse { beta } => beta,
+        Agg::Hard(_) => unreachable!(),
+    };
+    sc.terms.clear();
+    sc.tacc.clear();
+    let mut run = Acc::EMPTY;
+    for k in lo..=hi {
+        let acc = Acc::combine(run, Acc::lift(beta, psi[k]));
+        sc.terms.push(acc.value(inner));
+        sc.tacc.push(acc);
+        run = Acc::combine(run, Acc::lift(beta, phi[k]));
+    }
+}
+
+/// Adds the gradient of [`until_forward`] into `gphi` and `gpsi`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn until_backward(
     smoothing: Smoothing,
@@ -497,42 +488,75 @@ pub(crate) fn until_backward(
     sc: &mut Scratch,
 ) {
     let n = phi.len();
-    until_parts(smoothing, phi, psi, a, b, sc);
-    let (smax, smin) = (Agg::new(smoothing, Dir::Max), Agg::new(smoothing, Dir::Min));
-    let mut p = std::mem::take(&mut sc.until);
-    p.gv.clear();
-    p.gv.resize(n, 0.0);
-    p.gwin.clear();
-    p.gwin.resize(n, 0.0);
-    for t in 0..n {
-        if gout[t] == 0.0 {
-            continue;
+    match smoothing {
+        Smoothing::Hard => {
+            let mut v = std::mem::take(&mut sc.terms);
+            until_v(phi, psi, &mut v);
+            let mut fpsi = std::mem::take(&mut sc.vwin);
+            fpsi.clear();
+            fpsi.resize(n, 0.0);
+            window_forward(Agg::Hard(Dir::Max), psi, (a, b), &mut fpsi, &mut [], sc);
+            // Route each t to the window max of ψ or to V(lo); ties go to the window.
+            let mut gv = std::mem::take(&mut sc.gterm);
+            gv.clear();
+            gv.resize(n, 0.0);
+            let mut gwin = vec![0.0; n];
+            for t in 0..n {
+                let (lo, _) = window(t, a, b, n);
+                if fpsi[t] <= v[lo] {
+                    gwin[t] += gout[t];
+                } else {
+                    gv[lo] += gout[t];
+                }
+            }
+            window_backward(Agg::Hard(Dir::Max), psi, (a, b), &[], &[], &gwin, gpsi, sc);
+            for u in 0..n {
+                let g = gv[u];
+                if g == 0.0 {
+                    continue;
+                }
+                if u == n - 1 || psi[u] >= phi[u].min(v[u + 1]) {
+                    gpsi[u] += g;
+                } else if phi[u] <= v[u + 1] {
+                    gphi[u] += g;
+                } else {
+                    gv[u + 1] += g;
+                }
+            }
+            sc.terms = v;
+            sc.vwin = fpsi;
+            sc.gterm = gv;
         }
-        let (lo, _) = window(t, a, b, n);
-        let (x, y) = (p.win[t], p.v[lo]);
-        let (_, lw) = pair(smin, x, y);
-        let mut g = [0.0; 2];
-        reduce_backward(smin, &[x, y], out[t], lw, gout[t], &mut g);
-        p.gwin[t] += g[0];
-        p.gv[lo] += g[1];
-    }
-    window_backward(smax, psi, (a, b), &p.win, &p.lw_win, &p.gwin, gpsi, sc);
-    // V(u) reads V(u+1): adjoints flow from the start of the path to its end.
-    for u in 0..n - 1 {
-        let g = p.gv[u];
-        if g == 0.0 {
-            continue;
+        _ => {
+            let inner = Agg::new(smoothing, Dir::Min);
+            let outer = Agg::new(smoothing, Dir::Max);
+            for t in 0..n {
+                if gout[t] == 0.0 {
+                    continue;
+                }
+                let (lo, hi) = window(t, a, b, n);
+                soft_until_terms(inner, phi, psi, (lo, hi), sc);
+                let mut gterm = std::mem::take(&mut sc.gterm);
+                gterm.clear();
+                gterm.resize(sc.terms.len(), 0.0);
+                let (_, logw) = reduce_logw(outer, &sc.terms);
+                reduce_backward(outer, &sc.terms, out[t], logw, gout[t], &mut gterm);
+                // ψ_k only enters term k.
+                for (i, k) in (lo..=hi).enumerate() {
+                    let q = BAcc::lift(sc.tacc[i].log_weight(), gterm[i], sc.terms[i]);
+                    gpsi[k] += q.grad(inner, psi[k]);
+                }
+                // φ_j enters every term k > j: suffix sums over k.
+                let mut q = BAcc::EMPTY;
+                for k in (lo + 1..=hi).rev() {
+                    let i = k - lo;
+                    q = BAcc::combine(q, BAcc::lift(sc.tacc[i].log_weight(), gterm[i], sc.terms[i]));
+                    gphi[k - 1] += q.grad(inner, phi[k - 1]);
+                }
+                sc.gterm = gterm;
+            }
         }
-        let mut gi = [0.0; 2];
-        reduce_backward(smax, &[psi[u], p.inner[u]], p.v[u], p.lw_v[u], g, &mut gi);
-        gpsi[u] += gi[0];
-        let mut gj = [0.0; 2];
-        reduce_backward(smin, &[phi[u], p.v[u + 1]], p.inner[u], p.lw_inner[u], gi[1], &mut gj);
-        gphi[u] += gj[0];
-        p.gv[u + 1] += gj[1];
     }
-    gpsi[n - 1] += p.gv[n - 1];
-    sc.until = p;
 }
 
 #[cfg(test)]

@@ -3,10 +3,9 @@
 //! Predicates and logic are separate (see the crate docs): the predicates of a path
 //! of `T` steps give a `T × P` matrix of values, and a [`Program`] maps that matrix
 //! to the robustness signal `ρ(t)` for every start time `t`, and back to `∂ρ/∂values`.
-//! Every node is evaluated for all `T` steps in O(T) (windows and `until` included, in
-//! every mode), so one evaluation costs O(T · nodes) whatever the interval lengths.
-//! Smooth `until` is the smoothed form of an O(T) identity for the hard one
-//! (`aggregate`'s *Until*), not a smooth max over a smooth min per window.
+//! Every node is evaluated for all `T` steps in O(T) (windows included), so one
+//! evaluation costs O(T · nodes) whatever the interval lengths (soft `until` is the
+//! exception: O(T · w) for a window of `w` steps).
 //!
 //! # Finite paths
 //! Time indices past the end of the path are clamped to the last step, i.e. the path

@@ -154,29 +154,16 @@ pub fn reference_with(f: &Formula, path: &[f64], t: usize, sem: &Semantics, rule
             agg(temporal, false, &window(i).map(|k| reference(g, path, k, sem)).collect::<Vec<_>>())
         }
         Formula::Until(i, l, r) => {
-            // Hard: max over k of min(ψ_k, φ on [lo, k−1]) (App. C), by the definition.
-            // Smooth: min(max of ψ over the window, V(lo)) with the recursion
-            // V(u) = max(ψ_u, min(φ_u, V(u+1))), every min and max smoothed.
             let w = window(i);
             let lo = *w.start();
-            let paper = if temporal == Smoothing::Hard {
-                let terms: Vec<f64> = w
-                    .map(|k| {
-                        let mut inner = vec![reference(r, path, k, sem)];
-                        inner.extend((lo..k).map(|j| reference(l, path, j, sem)));
-                        agg(temporal, false, &inner)
-                    })
-                    .collect();
-                agg(temporal, true, &terms)
-            } else {
-                let mut v = reference(r, path, last, sem);
-                for u in (lo..last).rev() {
-                    let inner = agg(temporal, false, &[reference(l, path, u, sem), v]);
-                    v = agg(temporal, true, &[reference(r, path, u, sem), inner]);
-                }
-                let best = agg(temporal, true, &w.map(|k| reference(r, path, k, sem)).collect::<Vec<_>>());
-                agg(temporal, false, &[best, v])
-            };
+            let terms: Vec<f64> = w
+                .map(|k| {
+                    let mut inner = vec![reference(r, path, k, sem)];
+                    inner.extend((lo..k).map(|j| reference(l, path, j, sem)));
+                    agg(temporal, false, &inner)
+                })
+                .collect();
+            let paper = agg(temporal, true, &terms);
             if rule == UntilRule::Paper || i.start == 0 {
                 return paper;
             }
