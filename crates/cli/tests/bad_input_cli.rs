@@ -56,6 +56,21 @@ fn bad_training_numbers_are_named_before_a_run_directory_is_made() {
 }
 
 #[test]
+fn task_check_names_the_regions_to_avoid() {
+    let keys = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/tasks/keys.toml");
+    let o = schrl(&["task", "check", keys]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success()
+            && out.contains("regions to avoid, checked along the path")
+            && out.contains(": hazard"),
+        "{out}"
+    );
+    let o = schrl(&["task", "check", concat!(env!("CARGO_MANIFEST_DIR"), "/../../tasks/point/seq.toml")]);
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("regions to avoid"));
+}
+
+#[test]
 fn task_files_without_end_or_sense_are_refused_by_file_and_key() {
     fails_with(&["task", "check", "/dev/zero"], "/dev/zero: cannot read: larger than 1024 KiB");
     let toml = temp("c.toml");

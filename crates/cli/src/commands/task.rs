@@ -57,6 +57,13 @@ pub fn run(cmd: Command) -> Result<()> {
                 t.step_limit
             );
             println!("spec: {}", t.formula);
+            let avoid: Vec<&str> = t.avoid_regions().iter().map(|g| g.name.as_str()).collect();
+            if !avoid.is_empty() {
+                println!(
+                    "regions to avoid, checked along the path (planned segments, every step of a run): {}",
+                    avoid.join(", ")
+                );
+            }
             for w in t.warnings() {
                 println!("warning: {w}");
             }
