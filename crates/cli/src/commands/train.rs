@@ -95,11 +95,11 @@ pub struct TrainArgs {
     #[arg(long)]
     freeze_controller: bool,
     /// Metres by which the planner's goal discs are shrunk (at most a third of a radius)
-    /// [default: the robot's reach radius].
+    /// and its regions to avoid grown [default: the robot's reach radius].
     #[arg(long)]
     goal_margin: Option<f64>,
-    /// Metres of clearance the planner keeps from obstacles beyond the task's own
-    /// `safe_radius` [default: 0.1].
+    /// Metres of clearance the planner keeps from obstacles (beyond the task's own
+    /// `safe_radius`) and from regions to avoid [default: 0.1].
     #[arg(long)]
     safe_margin: Option<f64>,
     #[command(flatten)]
