@@ -200,13 +200,12 @@ fn the_planner_keeps_a_margin_from_regions_to_avoid_and_never_shrinks_them() {
     assert_eq!(hazard(&planned), hazard(&task));
     assert!(planned.goals.iter().filter(|g| g.name != "hazard").all(|g| g.radius < 0.5));
     // A path passing 0.45 m from the hazard's centre: clear of it by 5 cm, which is
-    // enough for the run but not for the planner's margin (0.3 m for the reach radius
-    // the controller cuts corners by, 0.1 m for its curves).
+    // enough for the run but not for the planner's 10 cm margin.
     let mut path = flat(&AROUND);
     path[2] = 2.45;
     path[4] = 2.45;
     path[6] = 2.45;
     let rho = |t: &Task| t.spec().robustness(&path, &Semantics::hard()).unwrap();
     assert!((rho(&task) - 0.05).abs() < 1e-9, "{}", rho(&task));
-    assert!((rho(&planned) + 0.35).abs() < 1e-9, "{}", rho(&planned));
+    assert!((rho(&planned) + 0.05).abs() < 1e-9, "{}", rho(&planned));
 }
