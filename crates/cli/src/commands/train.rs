@@ -95,7 +95,7 @@ pub struct TrainArgs {
     #[arg(long)]
     freeze_controller: bool,
     /// Metres by which the planner's goal discs are shrunk (at most a third of a radius)
-    /// and its regions to avoid grown [default: the robot's reach radius].
+    /// [default: the robot's reach radius].
     #[arg(long)]
     goal_margin: Option<f64>,
     /// Metres of clearance the planner keeps from obstacles (beyond the task's own
