@@ -12,7 +12,8 @@ use schrl::plan::planner::PlannerKind;
 use schrl::plan::pretrain::{PretrainConfig, pretrain};
 use schrl::run::RunError;
 use schrl::run::evaluate::{
-    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task, evaluate_task_with, mean_std,
+    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, RunRecord, TaskEval, evaluate_task, evaluate_task_with,
+    mean_std,
 };
 use schrl::run::joint::{JointConfig, JointMetrics, JointRunSettings, JointTrainer};
 use schrl::store::{self, Existing, JsonLines, MetricsLog, RunKind, RunWriter};
@@ -581,17 +582,22 @@ pub fn eval(args: EvalArgs) -> Result<()> {
         Some(path) => Some(JsonLines::create(path, args.force).map_err(super::store_error)?),
         None => None,
     };
-    let e = evaluate_task_with(
-        &t.task,
-        plans,
-        &controller,
-        (args.groups, args.per_group),
-        args.seed,
-        &mut |r| match records.as_mut() {
-            Some(w) => w.append(&r).map_err(|e| RunError::Record(e.to_string())),
-            None => Ok(()),
-        },
-    )?;
+    let task = &t.task;
+    let sizes = (args.groups, args.per_group);
+    let e =
+        evaluate_task_with(
+            task,
+            plans,
+            &controller,
+            sizes,
+            args.seed,
+            &mut |group, index, run| match records.as_mut() {
+                Some(w) => w
+                    .append(&RunRecord::of(run, task, group, index))
+                    .map_err(|e| RunError::Record(e.to_string())),
+                None => Ok(()),
+            },
+        )?;
     print_eval(&e);
     if let (Some(w), Some(path)) = (records, &args.trajectories) {
         w.finish().map_err(super::store_error)?;

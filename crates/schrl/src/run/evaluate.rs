@@ -126,18 +126,18 @@ pub fn evaluate_task(
     sizes: (usize, usize),
     seed: u64,
 ) -> Result<TaskEval, RunError> {
-    evaluate_task_with(task, plans, controller, sizes, seed, &mut |_| Ok(()))
+    evaluate_task_with(task, plans, controller, sizes, seed, &mut |_, _, _| Ok(()))
 }
 
-/// [`evaluate_task`], handing every run to `on_run` as it is judged (in order: group
-/// by group), e.g. to record it ([`RunRecord`]).
+/// [`evaluate_task`], handing every run to `on_run(group, index, run)` as it is judged
+/// (in order: group by group), e.g. to record it ([`RunRecord::of`]).
 pub fn evaluate_task_with(
     task: &Task,
     plans: Plans<'_>,
     controller: &Controller,
     (groups, per_group): (usize, usize),
     seed: u64,
-    on_run: &mut dyn FnMut(RunRecord) -> Result<(), RunError>,
+    on_run: &mut dyn FnMut(usize, usize, &Execution) -> Result<(), RunError>,
 ) -> Result<TaskEval, RunError> {
     let spec = task.execution_spec();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -174,7 +174,7 @@ pub fn evaluate_task_with(
                 Outcome::TimedOut => eval.timeouts += 1,
                 Outcome::Completed => eval.entered += usize::from(run.entered.is_some()),
             }
-            on_run(RunRecord::of(&run, task, group, index))?;
+            on_run(group, index, &run)?;
             if run.satisfied() {
                 sat += 1;
                 steps += reach_steps(&run, task);
