@@ -272,13 +272,6 @@ impl ExecutionSpec {
         if executed.len() != self.steps + 1 || reached_at.len() < self.steps {
             return not_done;
         }
-        if self.regions.is_empty() {
-            // Nothing is read from the trajectory: the reached positions are the path.
-            let flat: Vec<f64> = executed.iter().flat_map(|p| p[..self.dim].iter().copied()).collect();
-            let robustness =
-                self.spec.robustness(&flat, &stl::Semantics::hard()).unwrap_or(f64::NEG_INFINITY);
-            return Judged { robustness, entered: None };
-        }
         let width = self.dim + self.regions.len();
         let mut rows = vec![0.0; (self.steps + 1) * width];
         // First step inside each region along each segment: (region, segment, step).
@@ -286,6 +279,10 @@ impl ExecutionSpec {
         for t in 0..=self.steps {
             let row = &mut rows[t * width..(t + 1) * width];
             row[..self.dim].copy_from_slice(&executed[t][..self.dim]);
+            if self.regions.is_empty() {
+                // Nothing to read from the trajectory: the reached positions are the path.
+                continue;
+            }
             let span: Vec<(usize, &[f64])> = if trajectory.is_empty() {
                 let from = t.saturating_sub(1);
                 (from..=t)
