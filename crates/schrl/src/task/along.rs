@@ -111,14 +111,22 @@ impl SegmentRegion {
         Self { ball: Ball::new(goal.center.clone(), goal.radius + margin) }
     }
 
-    /// Where along `a → b` the closest point to the centre lies (0 at `a`).
-    fn closest(&self, a: &[f64], b: &[f64]) -> f64 {
+    /// The closest point of the segment into waypoint `t` (`t ≥ 1`) to the centre: where
+    /// along it it lies (`s`, 0 at waypoint `t − 1`) and the point (first `dim` entries;
+    /// plans are at most 3-D).
+    fn closest(&self, path: &[f64], dim: usize, t: usize) -> (f64, [f64; 3]) {
+        let (a, b) = (&path[(t - 1) * dim..t * dim], &path[t * dim..(t + 1) * dim]);
         let (mut ab2, mut dot) = (0.0, 0.0);
         for ((ai, bi), ci) in a.iter().zip(b).zip(&self.ball.center) {
             ab2 += (bi - ai) * (bi - ai);
             dot += (ci - ai) * (bi - ai);
         }
-        if ab2 > 0.0 { (dot / ab2).clamp(0.0, 1.0) } else { 0.0 }
+        let s = if ab2 > 0.0 { (dot / ab2).clamp(0.0, 1.0) } else { 0.0 };
+        let mut q = [0.0; 3];
+        for (qi, (ai, bi)) in q.iter_mut().zip(a.iter().zip(b)) {
+            *qi = ai + s * (bi - ai);
+        }
+        (s, q)
     }
 }
 
@@ -139,10 +147,8 @@ impl Predicate for SegmentRegion {
         if t == 0 {
             return self.value(0, &path[..dim]);
         }
-        let (a, b) = (&path[(t - 1) * dim..t * dim], &path[t * dim..(t + 1) * dim]);
-        let s = self.closest(a, b);
-        let q: Vec<f64> = a.iter().zip(b).map(|(ai, bi)| ai + s * (bi - ai)).collect();
-        self.ball.value(t, &q)
+        let (_, q) = self.closest(path, dim, t);
+        self.ball.value(t, &q[..dim])
     }
 
     fn value_and_grad_on_path(
@@ -156,14 +162,12 @@ impl Predicate for SegmentRegion {
         if t == 0 {
             return self.value_and_grad(0, &path[..dim], scale, &mut grad[..dim]);
         }
-        let (a, b) = (&path[(t - 1) * dim..t * dim], &path[t * dim..(t + 1) * dim]);
-        let s = self.closest(a, b);
-        let q: Vec<f64> = a.iter().zip(b).map(|(ai, bi)| ai + s * (bi - ai)).collect();
+        let (s, q) = self.closest(path, dim, t);
         // The gradient at the closest point, split between the ends (s fixed: the
         // envelope theorem, as q is the minimiser).
-        let mut gq = vec![0.0; dim];
-        let v = self.ball.value_and_grad(t, &q, scale, &mut gq);
-        for (i, g) in gq.iter().enumerate() {
+        let mut gq = [0.0; 3];
+        let v = self.ball.value_and_grad(t, &q[..dim], scale, &mut gq[..dim]);
+        for (i, g) in gq[..dim].iter().enumerate() {
             grad[(t - 1) * dim + i] += (1.0 - s) * g;
             grad[t * dim + i] += s * g;
         }
@@ -231,6 +235,8 @@ pub struct Judged {
 pub struct ExecutionSpec {
     spec: Spec,
     regions: Vec<GoalRegion>,
+    /// The regions' discs, as the trajectory is checked against them.
+    discs: Vec<Ball>,
     dim: usize,
     steps: usize,
 }
@@ -255,7 +261,8 @@ impl ExecutionSpec {
             )
             .build()
             .expect("task names are checked when the task is loaded");
-        Self { spec, regions, dim, steps: task.steps }
+        let discs = regions.iter().map(|g| Ball::new(g.center.clone(), g.radius)).collect();
+        Self { spec, regions, discs, dim, steps: task.steps }
     }
 
     /// The regions checked along the trajectory.
@@ -293,8 +300,7 @@ impl ExecutionSpec {
                 let last = if t == 0 { 0 } else { reached_at[t - 1] };
                 (first..=last.min(trajectory.len() - 1)).map(|s| (s, &trajectory[s][..])).collect()
             };
-            for (j, g) in self.regions.iter().enumerate() {
-                let ball = Ball::new(g.center.clone(), g.radius);
+            for (j, ball) in self.discs.iter().enumerate() {
                 let mut best = f64::NEG_INFINITY;
                 let mut first_in = None;
                 for (s, p) in &span {
