@@ -16,8 +16,12 @@
 //! rotor forces come from inverting the mixer and are clipped to [0, max].
 //!
 //! The 18-dimensional action scales the controller's gains: force P, I, D and
-//! torque P, I, D, three axes each, `gain = base · 2^a` with `a ∈ [−1, 1]` (so each
-//! gain ranges over half to twice its base). Base gains (reference setup): force P
+//! torque P, I, D, three axes each, `gain = base · 2^(a/8)` with `a ∈ [−1, 1]` (each
+//! gain within ±9 % of its base, [`GAIN_RANGE_LOG2`]). The base loop is only just
+//! damped: its attitude loop lags by P/D ≈ 1 s, so a 3 m step overshoots 0.5 m. With
+//! gains over half to twice their base, the corner of high force P, low force D and
+//! low torque P diverges (speeds of 12 m/s; a trained policy found it and looped
+//! metres past every waypoint); at ±9 % every corner still settles. Base gains (reference setup): force P
 //! (0.1, 0.1, 0.2), I 1e-4, D (0.3, 0.3, 0.4); torque P (0.3, 0.3, 0.05), D (0.3, 0.3,
 //! 0.5); the reference omits the torque I gain, taken here as 1e-4 like the force I.
 //!
@@ -58,6 +62,11 @@ const YAW_PER_FORCE: f64 = KM / KF;
 const ROLL_MIX: f64 = 1.0 / (2.0 * ARM);
 const YAW_MIX: f64 = 1.0 / (4.0 * YAW_PER_FORCE);
 const INTEGRAL_LIMIT: f64 = 2.0;
+
+/// How far an action moves a gain, in octaves: `gain = base · 2^(GAIN_RANGE_LOG2 · a)`,
+/// `a ∈ [−1, 1]`; the widest range whose every corner settles a 3 m step (the
+/// regression test `every_corner_of_the_gain_box_settles`).
+pub const GAIN_RANGE_LOG2: f64 = 0.125;
 
 /// Base PID gains: force P, I, D, torque P, I, D (3 axes each).
 pub const BASE_GAINS: [f64; 18] = [
@@ -226,7 +235,7 @@ impl Dynamics for Drone {
     fn advance(&mut self, action: &[f64], map: &Map, goal: &[f64]) -> bool {
         let mut gains = BASE_GAINS;
         for (g, a) in gains.iter_mut().zip(action) {
-            *g *= a.exp2();
+            *g *= (GAIN_RANGE_LOG2 * a).exp2();
         }
         let (desired, thrust) = self.position_loop(&gains, goal);
         let mut guard = ContactGuard::new(map, &self.pos, RADIUS);
