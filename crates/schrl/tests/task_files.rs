@@ -226,3 +226,27 @@ fn a_safe_margin_widens_the_clearance_planned_and_keeps_the_goals() {
         "a negative margin is none"
     );
 }
+
+/// Regression: the Drone counts a waypoint reached within 0.6 m and its goals are
+/// 0.5 m wide, so runs that reached every waypoint were judged on positions outside
+/// the goals (Drone Seq seed 0: 500 runs completed, satisfaction 0.000).
+#[test]
+fn a_waypoint_counts_as_reached_within_two_thirds_of_the_smallest_goal() {
+    let drone = Task::builtin("drone", TaskKind::Seq).unwrap();
+    assert!((drone.waypoint_reach(0.6) - 1.0 / 3.0).abs() < 1e-12);
+    // Point's goals (0.5 m and up) leave its 0.3 m reach radius alone.
+    for kind in [TaskKind::Seq, TaskKind::Branch, TaskKind::Loop, TaskKind::Signal] {
+        assert_eq!(Task::point(kind).waypoint_reach(0.3), 0.3);
+    }
+    // The executing environment uses it: reached at 0.35 m under the Drone's own
+    // radius, not under the task's.
+    let mut env = schrl::run::execute::task_env(sim::Robot::Drone, &drone).unwrap();
+    assert!((env.reach_radius() - 1.0 / 3.0).abs() < 1e-12);
+    env.reset(0, Some(&[2.0, 2.0, 1.0])).unwrap();
+    env.set_goal(&[2.35, 2.0, 1.0]).unwrap();
+    let (_, step) = env.step(&[0.0; 18]).unwrap();
+    assert!(!step.reached, "0.35 m is beyond the task's reach radius");
+    env.set_reach_radius(0.6).unwrap();
+    env.set_goal(&[2.35, 2.0, 1.0]).unwrap();
+    assert!(env.step(&[0.0; 18]).unwrap().1.reached);
+}

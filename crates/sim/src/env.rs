@@ -160,6 +160,14 @@ pub enum EnvError {
         /// The map's dimension.
         has: usize,
     },
+    /// A reach radius that is not a positive finite number of metres.
+    #[error("{robot}: reach radius {radius} must be a positive finite number of metres")]
+    BadReachRadius {
+        /// Robot name.
+        robot: &'static str,
+        /// What was given.
+        radius: f64,
+    },
     /// A saved state that is not a state of this robot (or is corrupt).
     #[error("cannot restore a {robot} environment from the saved state: {reason}")]
     BadState {
@@ -182,8 +190,12 @@ pub trait Env: Send {
     fn action_space(&self) -> &BoxSpace;
     /// Plan-space dimension (2 or 3).
     fn plan_dim(&self) -> usize;
-    /// Reach radius of a goal.
+    /// Reach radius of a goal: the robot's own ([`Dynamics::REACH_RADIUS`]) unless
+    /// [`Env::set_reach_radius`] changed it.
     fn reach_radius(&self) -> f64;
+    /// Counts a goal as reached within `radius` metres from now on (a task whose
+    /// goals are smaller than the robot's reach radius needs a tighter one).
+    fn set_reach_radius(&mut self, radius: f64) -> Result<(), EnvError>;
     /// Starts an episode: the robot at `start` (or a random free position), random
     /// heading, a random free goal; writes the first observation.
     fn reset_into(&mut self, seed: u64, start: Option<&[f64]>, obs: &mut [f64]) -> Result<(), EnvError>;
@@ -276,6 +288,7 @@ pub struct GoalEnv<D: Dynamics> {
     goal: Vec<f64>,
     prev_dist: f64,
     goal_reached: bool,
+    reach_radius: f64,
     steps: usize,
     max_steps: usize,
     rng: ChaCha8Rng,
@@ -300,6 +313,7 @@ impl<D: Dynamics> GoalEnv<D> {
             goal: vec![0.0; D::PLAN_DIM],
             prev_dist: 0.0,
             goal_reached: false,
+            reach_radius: D::REACH_RADIUS,
             steps: 0,
             max_steps: DEFAULT_MAX_STEPS,
             rng: ChaCha8Rng::seed_from_u64(0),
@@ -377,7 +391,15 @@ impl<D: Dynamics> Env for GoalEnv<D> {
     }
 
     fn reach_radius(&self) -> f64 {
-        D::REACH_RADIUS
+        self.reach_radius
+    }
+
+    fn set_reach_radius(&mut self, radius: f64) -> Result<(), EnvError> {
+        if !(radius.is_finite() && radius > 0.0) {
+            return Err(EnvError::BadReachRadius { robot: D::NAME, radius });
+        }
+        self.reach_radius = radius;
+        Ok(())
     }
 
     fn reset_into(&mut self, seed: u64, start: Option<&[f64]>, obs: &mut [f64]) -> Result<(), EnvError> {
@@ -424,7 +446,7 @@ impl<D: Dynamics> Env for GoalEnv<D> {
         let dist = self.distance();
         let mut reward = self.prev_dist - dist;
         self.prev_dist = dist;
-        let reached = !self.goal_reached && dist <= D::REACH_RADIUS;
+        let reached = !self.goal_reached && dist <= self.reach_radius;
         if reached {
             self.goal_reached = true;
             reward += REACH_BONUS;

@@ -214,3 +214,14 @@ fn doggo_without_the_mujoco_feature_says_how_to_enable_it() {
     let msg = err.to_string();
     assert!(msg.contains("scripts/setup-mujoco.sh") && msg.contains("--features mujoco"), "{msg}");
 }
+
+#[test]
+fn a_reach_radius_that_is_not_positive_and_finite_is_refused() {
+    let mut env = make_env(Robot::Point, Map::by_name("empty").unwrap()).unwrap();
+    for bad in [0.0, -0.1, f64::NAN, f64::INFINITY] {
+        let e = env.set_reach_radius(bad).unwrap_err();
+        assert!(matches!(e, EnvError::BadReachRadius { .. }), "{e}");
+        assert!(e.to_string().contains("positive finite"), "{e}");
+    }
+    assert_eq!(env.reach_radius(), 0.3, "a refused radius changes nothing");
+}

@@ -13,7 +13,7 @@ use sim::{Map, VecEnv};
 
 use super::RunError;
 use super::episode::{Episode, MeanActions, drive};
-use super::execute::{Execution, Outcome, WaypointDispatcher, start_run};
+use super::execute::{Execution, Outcome, WaypointDispatcher, start_run, task_env};
 use super::joint::paths_of;
 use crate::control::Controller;
 use crate::plan::gradient_planner::{self, GradientPlannerConfig};
@@ -154,9 +154,8 @@ pub fn evaluate_task_with(
         let g0 = task.sample_starts(&mut rng, per_group)?;
         let noise = task.sample_noise(&mut rng, per_group)?;
         let paths = plans.plan(task, &g0, &noise, &mut rng)?;
-        let mut envs = (0..paths.len())
-            .map(|_| sim::make_env(controller.robot, task.map.clone()))
-            .collect::<Result<Vec<_>, _>>()?;
+        let mut envs =
+            (0..paths.len()).map(|_| task_env(controller.robot, task)).collect::<Result<Vec<_>, _>>()?;
         let od = envs.first().map_or(0, |e| e.observation_space().dim());
         let mut raw = vec![0.0; paths.len() * od];
         let mut dispatchers = Vec::with_capacity(paths.len());

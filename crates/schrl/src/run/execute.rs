@@ -14,6 +14,7 @@
 use serde::{Deserialize, Serialize};
 use sim::{Env, Step};
 
+use crate::task::Task;
 use crate::task::along::{Entry, ExecutionSpec};
 
 /// How a run ended.
@@ -197,6 +198,15 @@ impl Execution {
             Some(n) => n.checked_sub(1).and_then(|i| self.reached_at.get(i)).copied(),
         }
     }
+}
+
+/// An environment for `robot` executing `task`'s plans: the task's map, and
+/// waypoints counted as reached within [`Task::waypoint_reach`].
+pub fn task_env(robot: sim::Robot, task: &Task) -> Result<Box<dyn Env>, sim::EnvError> {
+    let mut env = sim::make_env(robot, task.map.clone())?;
+    let reach = task.waypoint_reach(env.reach_radius());
+    env.set_reach_radius(reach)?;
+    Ok(env)
 }
 
 /// Puts `env` at a path's start with its first waypoint as the goal.

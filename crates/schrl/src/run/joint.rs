@@ -34,7 +34,7 @@ use crate::plan::cpg::{CpgConfig, PathLengthReward, PlanTrainer};
 use crate::run::RunError;
 use crate::run::episode::{Driver, drive};
 use crate::run::evaluate::reach_steps;
-use crate::run::execute::{Execution, Outcome, start_run};
+use crate::run::execute::{Execution, Outcome, start_run, task_env};
 use crate::task::Task;
 
 /// Joint-training settings.
@@ -318,9 +318,7 @@ impl JointTrainer {
         let planned = task.with_goal_margin(config.goal_margin).with_safe_margin(config.safe_margin);
         let plan = PlanTrainer::new(planned, cpg)?
             .with_control_reward(PathLengthReward { weight: config.length_weight });
-        let envs = (0..config.plan_batch)
-            .map(|_| sim::make_env(robot, task.map.clone()))
-            .collect::<Result<Vec<_>, _>>()?;
+        let envs = (0..config.plan_batch).map(|_| task_env(robot, &task)).collect::<Result<Vec<_>, _>>()?;
         let mut scaler = RewardScaler::new(config.plan_batch, control.config.ppo.gamma);
         scaler.stats = control.reward_scaler.stats.clone();
         let buffer = RolloutBuffer::new(1, control.policy.obs_dim(), control.policy.act_dim());
