@@ -243,6 +243,7 @@ fn joint_train_resume_and_eval_end_to_end() {
     assert!(o.status.success() && stdout(&o).contains("wrote 6 runs"), "{}", stderr(&o));
     let text = std::fs::read_to_string(&jsonl).unwrap();
     assert_eq!(text.lines().count(), 6);
+    let mut turned = false;
     for line in text.lines() {
         let r: serde_json::Value = serde_json::from_str(line).unwrap();
         assert!(r["satisfied"].is_boolean() && r["outcome"].is_string(), "{line}");
@@ -253,9 +254,14 @@ fn joint_train_resume_and_eval_end_to_end() {
             "a position per step and the start"
         );
         assert!(positions.iter().all(|p| p.as_array().unwrap().len() == 2));
+        let headings = r["headings"].as_array().unwrap();
+        assert_eq!(headings.len(), positions.len(), "a heading per position");
+        let yaw = |h: &serde_json::Value| h.as_f64().unwrap();
+        turned |= headings.iter().any(|h| (yaw(h) - yaw(&headings[0])).abs() > 0.5);
         assert_eq!(r["waypoints"].as_array().unwrap().len(), 7, "the start and 6 waypoints");
         assert!(r["reached_at"].as_array().unwrap().len() <= 6);
     }
+    assert!(turned, "the headings record the robot turning in some run");
     // Kept without --force.
     let o = eval_keys(&[]);
     assert!(!o.status.success() && stderr(&o).contains("--force"), "{}", stderr(&o));

@@ -207,6 +207,7 @@ fn rejudge(task: &schrl::task::Task, path: &std::path::Path) -> Result<()> {
             planned: r.waypoints.clone(),
             executed: r.reached.clone(),
             trajectory: vec![],
+            headings: vec![],
             outcome: recorded_outcome(&r, task.steps),
             steps: r.steps,
             reached_at: r.reached_at.clone(),

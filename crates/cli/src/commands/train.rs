@@ -19,7 +19,7 @@ use schrl::run::joint::{JointConfig, JointMetrics, JointRunSettings, JointTraine
 use schrl::store::{self, Existing, JsonLines, MetricsLog, RunKind, RunWriter};
 use schrl::task::Task;
 use sim::Robot;
-use sim::render::{ChartPanel, PathKind, Polyline, Scene, Series};
+use sim::render::{ChartPanel, PathKind, Polyline, RobotMarker, Scene, Series};
 use stl::Semantics;
 
 /// Arguments of `schrl train`. Flags left out take the default shown; with
@@ -287,7 +287,8 @@ pub struct EvalArgs {
     out: Option<PathBuf>,
     /// Write every run to this file, one JSON object per line: `satisfied`,
     /// `outcome`, `robustness`, `steps`, `steps_to_reach`, `waypoints` (the plan),
-    /// `reached`, `reached_at` and `positions` (the robot's position at every step).
+    /// `reached`, `reached_at`, `positions` (the robot's position at every step) and
+    /// `headings` (its yaw there).
     #[arg(long, value_name = "FILE.jsonl")]
     trajectories: Option<PathBuf>,
     /// Replace the picture and the trajectories file.
@@ -535,9 +536,17 @@ fn print_eval(e: &TaskEval) {
 fn draw(task: &Task, e: &TaskEval, out: &Path, force: bool) -> Result<()> {
     let mut scene = Scene::new(task.map.clone());
     scene.goals = task.picture_goals();
+    let radius = sim::make_env(task.robot, task.map.clone())?.radius();
     for run in e.examples.iter().take(4) {
         scene.paths.push(Polyline { points: run.planned.clone(), kind: PathKind::Planned });
         scene.paths.push(Polyline { points: run.trajectory.clone(), kind: PathKind::Executed });
+    }
+    // The first run's pose at eight moments: a Car drives forwards or backwards and
+    // turns on the spot, which the trace alone does not show.
+    if let Some(run) = e.examples.first() {
+        let every = (run.trajectory.len() / 8).max(1);
+        let poses = run.trajectory.iter().zip(&run.headings).skip(every).step_by(every);
+        scene.robots.extend(poses.map(|(p, &heading)| RobotMarker { position: p.clone(), heading, radius }));
     }
     sim::render::save(&scene, out, force)?;
     Ok(())

@@ -49,6 +49,8 @@ pub struct Episode {
     pub dispatcher: WaypointDispatcher,
     /// Every position, the start first.
     pub trajectory: Vec<Vec<f64>>,
+    /// The robot's heading (yaw, rad) at each of those positions.
+    pub headings: Vec<f64>,
     /// Sum of the environment's rewards.
     pub control_return: f64,
 }
@@ -69,8 +71,10 @@ pub fn drive(
     };
     let mut runs: Vec<Episode> = dispatchers
         .into_iter()
-        .map(|dispatcher| Episode {
+        .zip(envs.iter())
+        .map(|(dispatcher, env)| Episode {
             trajectory: vec![dispatcher.executed_path()[0].clone()],
+            headings: vec![env.heading()],
             dispatcher,
             control_return: 0.0,
         })
@@ -92,6 +96,7 @@ pub fn drive(
             let step = env.step_into(&actions[i * ad..(i + 1) * ad], obs)?;
             let run = &mut runs[i];
             run.trajectory.push(env.position().to_vec());
+            run.headings.push(env.heading());
             run.control_return += step.reward;
             rewards[i] = step.reward;
             match run.dispatcher.after_step(&step, env.position()) {

@@ -166,7 +166,8 @@ pub fn evaluate_task_with(
         let episodes = drive(&mut envs, dispatchers, &mut raw, &mut MeanActions::new(controller))?;
         let (mut sat, mut steps) = (0usize, 0.0f64);
         for (index, (e, path)) in episodes.into_iter().zip(&paths).enumerate() {
-            let run = e.dispatcher.into_execution(&spec, path.clone(), e.trajectory, e.control_return);
+            let run =
+                e.dispatcher.into_execution(&spec, path.clone(), e.trajectory, e.headings, e.control_return);
             match run.outcome {
                 Outcome::Collided => eval.collisions += 1,
                 Outcome::Fell => eval.falls += 1,
@@ -219,6 +220,10 @@ pub struct RunRecord {
     pub reached_at: Vec<usize>,
     /// The robot's position before the first step and after every environment step.
     pub positions: Vec<Vec<f64>>,
+    /// The robot's heading (yaw about the vertical, rad) at each of `positions`
+    /// (absent in files written before it was recorded).
+    #[serde(default)]
+    pub headings: Vec<f64>,
 }
 
 impl RunRecord {
@@ -236,6 +241,7 @@ impl RunRecord {
             reached: run.executed.clone(),
             reached_at: run.reached_at.clone(),
             positions: run.trajectory.clone(),
+            headings: run.headings.clone(),
         }
     }
 }

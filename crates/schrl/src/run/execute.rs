@@ -128,6 +128,7 @@ impl WaypointDispatcher {
         spec: &ExecutionSpec,
         planned: Vec<Vec<f64>>,
         trajectory: Vec<Vec<f64>>,
+        headings: Vec<f64>,
         control_return: f64,
     ) -> Execution {
         let judged = spec.judge(&self.reached, &trajectory, &self.reached_at);
@@ -139,6 +140,7 @@ impl WaypointDispatcher {
             steps: self.steps,
             executed: self.reached,
             trajectory,
+            headings,
             reached_at: self.reached_at,
             control_return,
         }
@@ -154,6 +156,9 @@ pub struct Execution {
     pub executed: Vec<Vec<f64>>,
     /// Every position the robot passed through.
     pub trajectory: Vec<Vec<f64>>,
+    /// The robot's heading (yaw about the vertical, rad) at each trajectory position.
+    #[serde(default)]
+    pub headings: Vec<f64>,
     /// How it ended.
     pub outcome: Outcome,
     /// Environment steps taken.

@@ -440,6 +440,7 @@ impl JointTrainer {
                 &spec,
                 paths[i].clone(),
                 run.trajectory,
+                run.headings,
                 run.control_return,
             ));
         }
