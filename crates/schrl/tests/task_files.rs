@@ -250,3 +250,22 @@ fn a_waypoint_counts_as_reached_within_two_thirds_of_the_smallest_goal() {
     env.set_goal(&[2.35, 2.0, 1.0]).unwrap();
     assert!(env.step(&[0.0; 18]).unwrap().1.reached);
 }
+
+/// Why Drone Loop is hard for the planner (README, *Car and Drone*): every waypoint
+/// must be in a goal, the straight segments from (−1, −1, 1) to the other goals
+/// pass through the duck, so the only plans that satisfy the spec as planned (0.3 m
+/// clearance) bounce between (2, 1, 1) and (1, 1, 2).
+#[test]
+fn drone_loop_can_only_bounce_between_two_goals() {
+    let t = Task::builtin("drone", TaskKind::Loop).unwrap();
+    let planned = t.with_goal_margin(0.6).with_safe_margin(0.1);
+    let goals = [[2.0, 1.0, 1.0], [1.0, 1.0, 2.0], [-1.0, -1.0, 1.0]];
+    let bounce = |a: usize, b: usize| {
+        let flat: Vec<f64> = (0..=t.steps).flat_map(|k| goals[if k % 2 == 0 { a } else { b }]).collect();
+        planned.spec().robustness(&flat, &stl::Semantics::hard()).unwrap()
+    };
+    assert!(bounce(0, 1) > 0.3, "{}", bounce(0, 1));
+    assert!(bounce(0, 2) < -0.3 && bounce(1, 2) < -0.3, "{} {}", bounce(0, 2), bounce(1, 2));
+    let cycle: Vec<f64> = (0..=t.steps).flat_map(|k| goals[k % 3]).collect();
+    assert!(planned.spec().robustness(&cycle, &stl::Semantics::hard()).unwrap() < 0.0);
+}
