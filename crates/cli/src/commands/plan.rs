@@ -10,6 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use schrl::plan::cpg::{CpgConfig, Method, PlanTrainer};
 use schrl::plan::deployed::{DeployedPlanner, PlanScratch};
 use schrl::plan::gradient_planner::{self, GradientPlannerConfig};
+use schrl::plan::mip::{self, MipConfig, MipSolver};
 use schrl::plan::planner::PlannerKind;
 use schrl::run::evaluate::mean_std;
 use schrl::store::planner::PlanRunSettings;
@@ -31,6 +32,95 @@ pub enum Command {
     /// The waypoints a jointly trained planner places beside the gradient planner's,
     /// from the same starts, in one picture (the paper's Fig. 5).
     Compare(CompareArgs),
+    /// Plan once with the mixed-integer planner: the spec as a MILP over the
+    /// waypoints, maximising robustness (App. J's MIP column).
+    Mip(MipArgs),
+}
+
+/// The MIP planner's settings as flags (`schrl plan mip`, `plan time`, `eval --planner mip`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct MipFlags {
+    /// Seconds the solver may take per plan; the best plan found by then is used.
+    #[arg(long, default_value_t = MipConfig::default().time_limit)]
+    time_limit: f64,
+    /// Solver: microlp (pure Rust), or highs (a build with `--features highs`).
+    #[arg(long, default_value = "microlp")]
+    solver: MipSolver,
+    /// Sides of the polygon inscribed in each goal disc.
+    #[arg(long, default_value_t = MipConfig::default().sides)]
+    sides: usize,
+    /// Tangent directions (one binary each) for keeping outside a disc.
+    #[arg(long, default_value_t = MipConfig::default().outside_sides)]
+    outside_sides: usize,
+    /// Largest step between waypoints per coordinate, metres.
+    #[arg(long, default_value_t = MipConfig::default().max_step)]
+    max_step: f64,
+    /// Weight of the plan's 1-norm length against robustness in the objective.
+    #[arg(long, default_value_t = MipConfig::default().length_weight)]
+    length_weight: f64,
+}
+
+impl MipFlags {
+    /// The planner's settings, checked; errors name the flag.
+    pub fn config(&self) -> Result<MipConfig> {
+        let c = MipConfig {
+            sides: self.sides,
+            outside_sides: self.outside_sides,
+            max_step: self.max_step,
+            length_weight: self.length_weight,
+            time_limit: self.time_limit,
+            solver: self.solver,
+        };
+        c.validate().map_err(|e| anyhow::anyhow!("{}", mip_flag(&e)))?;
+        Ok(c)
+    }
+}
+
+/// A [`MipConfig::validate`] message with its key as the flag (`mip.max_step` → `--max-step`).
+fn mip_flag(message: &str) -> String {
+    match message.strip_prefix("mip.").and_then(|m| m.split_once(' ')) {
+        Some((key, rest)) => format!("--{} {rest}", key.trim_end_matches(':').replace('_', "-")),
+        None => message.to_string(),
+    }
+}
+
+/// Arguments of `schrl plan mip`.
+#[derive(clap::Args, Debug)]
+pub struct MipArgs {
+    /// Robot of a built-in task (default: point).
+    #[arg(long)]
+    robot: Option<sim::Robot>,
+    /// Task: seq, cover, branch, loop, signal, or a task file (TOML).
+    #[arg(long)]
+    task: String,
+    /// Start position `x,y`; without it, one drawn from the task's start region.
+    #[arg(long, value_parser = parse_start, allow_hyphen_values = true)]
+    start: Option<Vec<f64>>,
+    /// Seed of the drawn start.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[command(flatten)]
+    mip: MipFlags,
+    /// The plan (JSON: waypoints, robustness, solve time).
+    #[arg(long)]
+    out: PathBuf,
+    /// Also draw the plan on the map (PNG or SVG).
+    #[arg(long)]
+    picture: Option<PathBuf>,
+    /// Replace --out and --picture if they exist.
+    #[arg(long)]
+    force: bool,
+}
+
+fn parse_start(s: &str) -> Result<Vec<f64>, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|_| format!("'{x}' in '{s}' is not a number")))
+        .collect::<Result<_, _>>()?;
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err(format!("'{s}' has a number that is not finite"));
+    }
+    Ok(v)
 }
 
 /// Arguments of `schrl plan compare`.
@@ -236,6 +326,7 @@ pub fn run(cmd: Command) -> Result<()> {
         Command::Sample(args) => sample(args),
         Command::Time(args) => time(args),
         Command::Compare(args) => compare(args),
+        Command::Mip(args) => mip(args),
     }
 }
 
@@ -442,4 +533,92 @@ fn compare(args: CompareArgs) -> Result<()> {
 
 fn dist(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
+}
+
+/// The start of a plan: the one given, checked against the task's map, or one drawn
+/// from the task's start region.
+fn start_for(task: &Task, given: Option<&[f64]>, seed: u64) -> Result<Vec<f64>> {
+    let Some(s) = given else {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        return Ok(task.sample_starts(&mut rng, 1)?.to_dtype(candle_core::DType::F64)?.to_vec2()?.remove(0));
+    };
+    let dim = task.map.dim();
+    if s.len() != dim {
+        bail!("--start: the {} plans in {dim}-D, so give {dim} numbers (x,y), not {}", task.robot, s.len());
+    }
+    let (lo, hi) = task.map.region();
+    if s.iter().zip(lo.iter().zip(&hi)).any(|(x, (l, h))| x < l || x > h) {
+        bail!("--start: {s:?} lies outside the {} map's region ({lo:?} to {hi:?})", task.map.name());
+    }
+    if task.map.sdf(s) <= 0.0 {
+        bail!("--start: {s:?} lies inside an obstacle of the {} map", task.map.name());
+    }
+    Ok(s.to_vec())
+}
+
+fn mip(args: MipArgs) -> Result<()> {
+    let task = super::task::resolve(args.robot, &args.task)?;
+    let cfg = args.mip.config()?;
+    let start = start_for(&task, args.start.as_deref(), args.seed)?;
+    // Outputs are checked before the solve, which can take a while.
+    if args.out.exists() && !args.force {
+        return Err(super::store_error(schrl::store::StoreError::FileExists(args.out.clone())));
+    }
+    if let Some(p) = &args.picture {
+        sim::render::check_target(p, args.force)?;
+    }
+    let spinner = ProgressBar::new_spinner();
+    spinner.set_message(format!("solving {} from {start:.2?} with {}", task.name, cfg.solver.name()));
+    spinner.enable_steady_tick(std::time::Duration::from_millis(200));
+    let plan = mip::plan(&task, &start, &cfg);
+    spinner.finish_and_clear();
+    let plan = plan?;
+    println!(
+        "program: {} binaries, {} constraints; {}",
+        plan.binaries,
+        plan.constraints,
+        if plan.optimal { "solved to optimality" } else { "time limit reached: best plan found so far" }
+    );
+    println!("solve time: {:.3} s", plan.seconds);
+    println!("program robustness: {:.4}", plan.program_robustness);
+    println!("robustness: {:.4}", plan.robustness);
+    if !plan.satisfied() {
+        let why = if plan.optimal {
+            format!(
+                "infeasible: the most robust plan of {} waypoints from {start:.2?} has robustness {:.4} \
+                 (program: {:.4}), so no plan satisfies the spec (up to the polygon approximation)",
+                task.steps, plan.robustness, plan.program_robustness
+            )
+        } else {
+            format!(
+                "time-out: after {} s the best plan has robustness {:.4}; raise --time-limit",
+                cfg.time_limit, plan.robustness
+            )
+        };
+        bail!(why);
+    }
+    let dim = task.map.dim();
+    let waypoints: Vec<Vec<f64>> = plan.path.chunks(dim).map(|c| c.to_vec()).collect();
+    if let Some(p) = &args.picture {
+        let mut scene = Scene::new(task.map.clone());
+        scene.goals = task.picture_goals();
+        scene.labels.planned = "MIP plan".into();
+        scene.paths.push(Polyline { points: waypoints.clone(), kind: PathKind::Planned });
+        sim::render::save(&scene, p, args.force)?;
+        println!("wrote {}", p.display());
+    }
+    let file = schrl::store::plan_file::PlanFile {
+        planner: "mip".into(),
+        task: task.name.clone(),
+        robot: task.robot.name().into(),
+        waypoints,
+        robustness: plan.robustness,
+        program_robustness: plan.program_robustness,
+        optimal: plan.optimal,
+        seconds: plan.seconds,
+        solver: cfg.solver.name().into(),
+    };
+    schrl::store::plan_file::save(&file, &args.out, args.force).map_err(super::store_error)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
 }

@@ -34,6 +34,7 @@ pub mod controller;
 pub mod joint;
 mod lines;
 mod metrics;
+pub mod plan_file;
 pub mod planner;
 pub mod sdf;
 

@@ -30,7 +30,7 @@ use super::{GoalRegion, Task};
 
 /// The name an avoid occurrence of `goal` is bound under; `:` is not allowed in spec
 /// names, so it never clashes with a user's.
-fn along_name(goal: &str) -> String {
+pub(crate) fn along_name(goal: &str) -> String {
     format!("{goal}:along")
 }
 
@@ -195,7 +195,7 @@ impl Predicate for Column {
 }
 
 /// The planner's bindings for avoid occurrences: `(name, predicate)`.
-pub(super) fn planning_bindings(task: &Task) -> Vec<(String, Arc<dyn Predicate>)> {
+pub(crate) fn planning_bindings(task: &Task) -> Vec<(String, Arc<dyn Predicate>)> {
     task.avoid_regions()
         .into_iter()
         .map(|g| {

@@ -1,0 +1,315 @@
+//! A spec as a mixed-integer linear program over a plan's waypoints (Raman et al.
+//! 2014; Belta & Sadraddini 2019), in the one-sided form that suffices when robustness
+//! is maximised.
+//!
+//! Each sub-formula at each waypoint gets a value `r` that is only bounded *above* by
+//! what it stands for, so `r` is a lower bound of the (linearised) robustness and the
+//! maximum of the root's `r` is the maximum robustness:
+//!
+//! * `min` (`∧`, `□`, the predicates' inscribed polygons): `r ≤ rᵢ` for every operand,
+//!   no binaries;
+//! * `max` (`∨`, `◇`, `U`): one binary `bᵢ` per operand, `Σ bᵢ = 1`,
+//!   `r ≤ rᵢ + Mᵢ (1 − bᵢ)`.
+//!
+//! Negation is pushed down to the predicates (`¬□ = ◇¬`, `¬(φ U ψ)` = the dual
+//! min-max), so no constraint ever bounds `r` from below. Time follows the STL
+//! library's finite-path rule (indices past the end read the last waypoint) and its
+//! until readings, so the program's robustness is that of [`stl::Spec`] with the
+//! predicates replaced by their [`Shape`]s.
+//!
+//! Every value carries an interval `[lo, hi]` from the plan region, so each big-M is
+//! the tightest the interval allows (`Mᵢ = hi(r) − lo(rᵢ)`), and operands that can
+//! never decide a `min` or `max` are dropped before they cost a binary.
+
+use std::collections::HashMap;
+
+use good_lp::{Constraint, Expression, ProblemVariables, Variable, variable};
+use stl::{Formula, Interval, UntilRule};
+
+use super::MipError;
+use super::geometry::{Atoms, Shape};
+
+/// A lower bound of a robustness value: a number, or an affine expression in the
+/// program's variables with the interval it can take.
+#[derive(Clone, Debug)]
+pub(super) enum Rob {
+    /// Known in advance.
+    Const(f64),
+    /// Depends on the plan.
+    Lin {
+        /// The value.
+        e: Expression,
+        /// Its least possible value.
+        lo: f64,
+        /// Its greatest possible value.
+        hi: f64,
+    },
+}
+
+impl Rob {
+    fn bounds(&self) -> (f64, f64) {
+        match self {
+            Rob::Const(c) => (*c, *c),
+            Rob::Lin { lo, hi, .. } => (*lo, *hi),
+        }
+    }
+}
+
+/// The program under construction: waypoint variables, constraints, binaries.
+pub(super) struct Program {
+    /// Variables of the program.
+    pub vars: ProblemVariables,
+    /// Its constraints.
+    pub constraints: Vec<Constraint>,
+    /// Waypoints `1..=T` (index `t − 1`), two coordinates each.
+    pub x: Vec<[Variable; 2]>,
+    /// Binary variables, in the order they were created.
+    pub binaries: Vec<Variable>,
+    start: [f64; 2],
+    lo: [f64; 2],
+    hi: [f64; 2],
+}
+
+impl Program {
+    /// Waypoint variables for a plan of `steps` waypoints after `start`, inside the
+    /// region `(lo, hi)`.
+    pub fn new(start: [f64; 2], steps: usize, (lo, hi): ([f64; 2], [f64; 2])) -> Self {
+        let mut vars = ProblemVariables::new();
+        let x = (0..steps).map(|_| [0, 1].map(|k| vars.add(variable().min(lo[k]).max(hi[k])))).collect();
+        Self { vars, constraints: vec![], x, binaries: vec![], start, lo, hi }
+    }
+
+    /// The start (waypoint 0).
+    pub fn start(&self) -> [f64; 2] {
+        self.start
+    }
+
+    /// `constant + Σ c · x_t[k]`, the start's coordinates folded into the constant.
+    fn affine(&mut self, terms: &[(usize, usize, f64)], constant: f64) -> Rob {
+        let (mut e, mut lo, mut hi) = (Expression::from(constant), constant, constant);
+        let mut any = false;
+        for &(t, k, c) in terms {
+            if t == 0 {
+                e += c * self.start[k];
+                lo += c * self.start[k];
+                hi += c * self.start[k];
+            } else {
+                any = true;
+                e.add_mul(c, self.x[t - 1][k]);
+                lo += (c * self.lo[k]).min(c * self.hi[k]);
+                hi += (c * self.lo[k]).max(c * self.hi[k]);
+            }
+        }
+        if any { Rob::Lin { e, lo, hi } } else { Rob::Const(lo) }
+    }
+
+    /// A fresh continuous variable in `[lo, hi]`.
+    fn value(&mut self, lo: f64, hi: f64) -> Variable {
+        self.vars.add(variable().min(lo).max(hi))
+    }
+
+    /// `min` of the operands.
+    pub fn min(&mut self, items: Vec<Rob>) -> Rob {
+        let hi = items.iter().map(|r| r.bounds().1).fold(f64::INFINITY, f64::min);
+        // An operand that is never below another's greatest value never decides the
+        // min; the rest are constants, or equal to one at their least (`lo = hi`).
+        let (mut lins, mut fixed) = (vec![], f64::INFINITY);
+        for r in items {
+            match r {
+                Rob::Lin { e, lo: l, hi: h } if l < hi => lins.push((e, l, h)),
+                other => fixed = fixed.min(other.bounds().0),
+            }
+        }
+        if lins.is_empty() {
+            return Rob::Const(fixed);
+        }
+        if lins.len() == 1 && fixed >= lins[0].2 {
+            let (e, lo, hi) = lins.pop().expect("one operand");
+            return Rob::Lin { e, lo, hi };
+        }
+        let lo = lins.iter().map(|l| l.1).fold(f64::INFINITY, f64::min);
+        // r ≤ every operand; the constants through r's upper bound.
+        let r = self.value(lo, hi);
+        for (e, _, _) in lins {
+            self.constraints.push(Expression::from(r).leq(e));
+        }
+        Rob::Lin { e: r.into(), lo, hi }
+    }
+
+    /// `max` of the operands.
+    pub fn max(&mut self, items: Vec<Rob>) -> Rob {
+        let lo = items.iter().map(|r| r.bounds().0).fold(f64::NEG_INFINITY, f64::max);
+        // An operand that is never above another's least value never decides the max;
+        // the rest are constants, or equal to one at their greatest (`lo = hi`).
+        let (mut lins, mut fixed) = (vec![], f64::NEG_INFINITY);
+        for r in items {
+            match r {
+                Rob::Lin { e, lo: l, hi: h } if h > lo => lins.push((e, l, h)),
+                other => fixed = fixed.max(other.bounds().1),
+            }
+        }
+        if lins.is_empty() {
+            return Rob::Const(fixed);
+        }
+        let best_lin_lo = lins.iter().map(|l| l.1).fold(f64::NEG_INFINITY, f64::max);
+        if lins.len() == 1 && fixed <= best_lin_lo {
+            let (e, lo, hi) = lins.pop().expect("one operand");
+            return Rob::Lin { e, lo, hi };
+        }
+        let hi = lins.iter().map(|l| l.2).fold(fixed, f64::max);
+        let r = self.value(lo, hi);
+        let mut choice = Expression::from(0.0);
+        // The constant is an option only where no operand is always at least as large.
+        let constant = (fixed > best_lin_lo).then_some((Expression::from(fixed), fixed, fixed));
+        for (e, l, _) in lins.into_iter().chain(constant) {
+            let b = self.vars.add(variable().binary());
+            self.binaries.push(b);
+            choice += b;
+            // r ≤ e + (hi − l)(1 − b)
+            self.constraints.push((Expression::from(r) + (hi - l) * b).leq(e + (hi - l)));
+        }
+        self.constraints.push(choice.eq(1.0));
+        Rob::Lin { e: r.into(), lo, hi }
+    }
+
+    /// The value of a shape.
+    fn shape(&mut self, s: &Shape) -> Rob {
+        match s {
+            Shape::Const(c) => Rob::Const(*c),
+            Shape::Affine { terms, constant } => self.affine(terms, *constant),
+            Shape::Min(v) => {
+                let items = v.iter().map(|s| self.shape(s)).collect();
+                self.min(items)
+            }
+            Shape::Max(v) => {
+                let items = v.iter().map(|s| self.shape(s)).collect();
+                self.max(items)
+            }
+        }
+    }
+}
+
+/// Encodes sub-formulas at waypoints, each (sub-formula, waypoint, sign) once.
+pub(super) struct Encoder<'a> {
+    program: &'a mut Program,
+    atoms: &'a Atoms,
+    /// States in the path (`T + 1`).
+    n: usize,
+    until: UntilRule,
+    /// The robustness of `true`.
+    top: f64,
+    memo: HashMap<(usize, usize, bool), Rob>,
+}
+
+impl<'a> Encoder<'a> {
+    /// An encoder writing into `program`.
+    pub fn new(program: &'a mut Program, atoms: &'a Atoms, until: UntilRule, top: f64) -> Self {
+        let n = program.x.len() + 1;
+        Self { program, atoms, n, until, top, memo: HashMap::new() }
+    }
+
+    /// The window `[t + a, t + b]` cut at the last waypoint (the library's rule).
+    fn window(&self, t: usize, iv: &Interval) -> std::ops::RangeInclusive<usize> {
+        let last = self.n - 1;
+        let lo = t.saturating_add(iv.start).min(last);
+        let hi = iv.end.map_or(last, |b| t.saturating_add(b).min(last));
+        lo..=hi
+    }
+
+    /// The robustness of `f` (of `¬f` when `positive` is false) at waypoint `t`.
+    pub fn encode(&mut self, f: &Formula, t: usize, positive: bool) -> Result<Rob, MipError> {
+        let key = (f as *const Formula as usize, t, positive);
+        if let Some(r) = self.memo.get(&key) {
+            return Ok(r.clone());
+        }
+        let r = self.encode_new(f, t, positive)?;
+        self.memo.insert(key, r.clone());
+        Ok(r)
+    }
+
+    /// `min` when `conjunctive` holds in the positive reading (its dual negated).
+    fn combine(&mut self, conjunctive: bool, positive: bool, items: Vec<Rob>) -> Rob {
+        let min = conjunctive == positive;
+        match (items.is_empty(), min) {
+            (true, true) => Rob::Const(self.top),
+            (true, false) => Rob::Const(-self.top),
+            (false, true) => self.program.min(items),
+            (false, false) => self.program.max(items),
+        }
+    }
+
+    fn all(&mut self, fs: &[&Formula], at: &[usize], positive: bool) -> Result<Vec<Rob>, MipError> {
+        let mut out = Vec::with_capacity(fs.len() * at.len());
+        for f in fs {
+            for &t in at {
+                out.push(self.encode(f, t, positive)?);
+            }
+        }
+        Ok(out)
+    }
+
+    fn encode_new(&mut self, f: &Formula, t: usize, positive: bool) -> Result<Rob, MipError> {
+        let sign = if positive { 1.0 } else { -1.0 };
+        Ok(match f {
+            Formula::True => Rob::Const(sign * self.top),
+            Formula::False => Rob::Const(-sign * self.top),
+            Formula::Atom(name) => self.atom(name, t, sign, 0.0)?,
+            // `op.sign() · (ρ − threshold)`, negated when `positive` is false.
+            Formula::Compare { signal, op, threshold } => {
+                let s = sign * op.sign();
+                self.atom(signal, t, s, -s * threshold)?
+            }
+            Formula::Not(c) => self.encode(c, t, !positive)?,
+            Formula::And(v) => {
+                let items = self.all(&v.iter().collect::<Vec<_>>(), &[t], positive)?;
+                self.combine(true, positive, items)
+            }
+            Formula::Or(v) => {
+                let items = self.all(&v.iter().collect::<Vec<_>>(), &[t], positive)?;
+                self.combine(false, positive, items)
+            }
+            // l → r = ¬l ∨ r
+            Formula::Implies(l, r) => {
+                let items = vec![self.encode(l, t, !positive)?, self.encode(r, t, positive)?];
+                self.combine(false, positive, items)
+            }
+            Formula::Next(c) => self.encode(c, (t + 1).min(self.n - 1), positive)?,
+            Formula::Eventually(iv, c) => {
+                let at: Vec<usize> = self.window(t, iv).collect();
+                let items = self.all(&[c], &at, positive)?;
+                self.combine(false, positive, items)
+            }
+            Formula::Globally(iv, c) => {
+                let at: Vec<usize> = self.window(t, iv).collect();
+                let items = self.all(&[c], &at, positive)?;
+                self.combine(true, positive, items)
+            }
+            Formula::Until(iv, l, r) => {
+                // max over k of min(ψ_k, φ_j for j in [from, k − 1])
+                let window = self.window(t, iv);
+                let from = *window.start();
+                let mut options = vec![];
+                for k in window {
+                    let mut terms = vec![self.encode(r, k, positive)?];
+                    terms.extend(self.all(&[l], &(from..k).collect::<Vec<_>>(), positive)?);
+                    options.push(self.combine(true, positive, terms));
+                }
+                let until = self.combine(false, positive, options);
+                if self.until == UntilRule::Standard && iv.start > 0 {
+                    // The standard reading also needs φ on [t, t + a − 1].
+                    let before = self.window(t, &Interval::bounded(0, iv.start - 1));
+                    let mut terms = self.all(&[l], &before.collect::<Vec<_>>(), positive)?;
+                    terms.push(until);
+                    self.combine(true, positive, terms)
+                } else {
+                    until
+                }
+            }
+        })
+    }
+
+    fn atom(&mut self, name: &str, t: usize, sign: f64, offset: f64) -> Result<Rob, MipError> {
+        let shape = self.atoms.shape(name, t, sign, offset)?;
+        Ok(self.program.shape(&shape))
+    }
+}

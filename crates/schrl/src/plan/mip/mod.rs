@@ -1,0 +1,345 @@
+//! The mixed-integer STL planner (paper App. J, Table 5's MIP column; Raman et al.
+//! 2014): the task's spec over the plan's waypoints as a mixed-integer linear program,
+//! solved to optimality.
+//!
+//! * Variables: waypoints `1..=T` (the start is given), inside the map's plan region,
+//!   each step at most [`MipConfig::max_step`] per coordinate.
+//! * Predicates: piecewise-linear lower bounds ([`geometry`]): goal discs as inscribed
+//!   polygons, staying outside a disc as tangent half-planes, walls as a disjunction
+//!   of each box's sides, at waypoints or along segments as the task checks `safe`
+//!   and its avoid regions. So `ρ̃ ≤ ρ`: a plan with `ρ̃ > 0` satisfies the spec.
+//! * Logic and time: big-M over waypoint indices ([`encode`]), negation pushed down.
+//! * Objective: maximise `ρ̃ − w · L`, with `L` the plan's length in the 1-norm and
+//!   `w` = [`MipConfig::length_weight`] (10⁻³: of plans within a few millimetres of
+//!   the best robustness, the shortest), i.e. robustness first, not shortest path.
+//!
+//! Every plan is checked with the exact hard robustness of the task's spec
+//! ([`MipPlan::robustness`]), which is at least the program's `ρ̃`
+//! ([`MipPlan::program_robustness`]) and exceeds it by the polygons' error at most.
+//!
+//! Loop and Signal are encoded as written (the authors re-encoded them as repeated
+//! sequences for their MIP).
+
+mod encode;
+mod geometry;
+
+use std::time::Instant;
+
+use good_lp::{Expression, ResolutionError, Solution, SolutionStatus, SolverModel, WithTimeLimit};
+use stl::{EvalError, Semantics};
+
+use crate::task::{Task, UNTIL};
+
+/// The solver the program is handed to.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MipSolver {
+    /// microlp, pure Rust (builds with cargo alone): the default.
+    #[default]
+    Microlp,
+    /// HiGHS (cargo feature `highs`; needs cmake and libclang to build).
+    #[cfg(feature = "highs")]
+    Highs,
+}
+
+impl MipSolver {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            MipSolver::Microlp => "microlp",
+            #[cfg(feature = "highs")]
+            MipSolver::Highs => "highs",
+        }
+    }
+}
+
+impl std::str::FromStr for MipSolver {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "microlp" => Ok(MipSolver::Microlp),
+            #[cfg(feature = "highs")]
+            "highs" => Ok(MipSolver::Highs),
+            #[cfg(not(feature = "highs"))]
+            "highs" => {
+                Err("this build has no HiGHS: build with `--features highs` (scripts/setup-highs.sh)".into())
+            }
+            other => Err(format!("unknown solver '{other}': expected microlp or highs")),
+        }
+    }
+}
+
+/// Settings of the MIP planner (this project's; the paper gives none).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MipConfig {
+    /// Sides of the polygon inscribed in a goal disc (16: at most 2 % low).
+    pub sides: usize,
+    /// Tangent directions for staying outside a disc; each is a binary (8: at most
+    /// 7.6 % low).
+    pub outside_sides: usize,
+    /// Largest step between waypoints, per coordinate (10 m: the planner network's
+    /// step bound, reference setup).
+    pub max_step: f64,
+    /// Weight `w` of the plan's 1-norm length in the objective.
+    pub length_weight: f64,
+    /// Seconds the solver may take; the best plan found by then is returned.
+    pub time_limit: f64,
+    /// The solver.
+    pub solver: MipSolver,
+}
+
+impl Default for MipConfig {
+    fn default() -> Self {
+        Self {
+            sides: 16,
+            outside_sides: 8,
+            max_step: 10.0,
+            length_weight: 1e-3,
+            time_limit: 60.0,
+            solver: MipSolver::default(),
+        }
+    }
+}
+
+impl MipConfig {
+    /// Checks the settings; the message names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(3..=256).contains(&self.sides) {
+            return Err(format!("mip.sides: {} is not in 3..=256", self.sides));
+        }
+        if !(3..=256).contains(&self.outside_sides) {
+            return Err(format!("mip.outside_sides: {} is not in 3..=256", self.outside_sides));
+        }
+        if !(self.max_step > 0.0 && self.max_step.is_finite()) {
+            return Err(format!("mip.max_step: {} is not a positive number of metres", self.max_step));
+        }
+        if !(self.length_weight >= 0.0 && self.length_weight.is_finite()) {
+            return Err(format!("mip.length_weight: {} is not a non-negative number", self.length_weight));
+        }
+        if !(self.time_limit > 0.0 && self.time_limit.is_finite()) {
+            return Err(format!("mip.time_limit: {} is not a positive number of seconds", self.time_limit));
+        }
+        Ok(())
+    }
+}
+
+/// Why no plan came back.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MipError {
+    /// Something in the task the encoding does not cover.
+    #[error("cannot encode {0}")]
+    Unsupported(String),
+    /// A setting is out of range.
+    #[error("invalid setting {0}")]
+    Setting(String),
+    /// The time limit passed before the solver found any plan.
+    #[error("time-out: no plan found within the time limit of {0} s; raise it (--time-limit)")]
+    TimeOut(f64),
+    /// The solver failed.
+    #[error("solver {solver} failed: {message}")]
+    Solver {
+        /// The solver's name.
+        solver: &'static str,
+        /// Its message.
+        message: String,
+    },
+    /// The exact robustness of the plan could not be evaluated.
+    #[error("checking the plan: {0}")]
+    Eval(#[from] EvalError),
+}
+
+/// A plan from the MIP planner.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MipPlan {
+    /// `(T + 1) · 2` numbers, the start first.
+    pub path: Vec<f64>,
+    /// Exact hard robustness of the plan (> 0: satisfied).
+    pub robustness: f64,
+    /// The program's robustness `ρ̃ ≤ ρ` (the linearised predicates).
+    pub program_robustness: f64,
+    /// `true` if the solver proved the plan optimal; `false` if the time limit cut it.
+    pub optimal: bool,
+    /// Seconds to build and solve the program.
+    pub seconds: f64,
+    /// Binary variables in the program.
+    pub binaries: usize,
+    /// Constraints in the program.
+    pub constraints: usize,
+}
+
+impl MipPlan {
+    /// `true` if the path satisfies the spec.
+    pub fn satisfied(&self) -> bool {
+        self.robustness > 0.0
+    }
+}
+
+/// Plans for `task` from `start` with the MIP planner. A spec no plan satisfies is
+/// not an error here: the plan maximising `ρ̃` comes back with `ρ̃ ≤ 0` (see
+/// [`MipPlan::satisfied`]).
+pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipError> {
+    cfg.validate().map_err(MipError::Setting)?;
+    if task.map.dim() != 2 || start.len() != 2 {
+        return Err(MipError::Unsupported(format!(
+            "a {}-D plan: the MIP planner encodes 2-D tasks (Point, Car, Doggo)",
+            task.map.dim()
+        )));
+    }
+    let t0 = Instant::now();
+    // Stage 1: the most robust plan (the discrete choices that matter).
+    let most = Built::new(task, start, cfg)?;
+    let binaries = most.program.binaries.len();
+    let constraints = most.program.constraints.len();
+    let root = most.root.clone();
+    let (status, (_, choices, best)) = most.solve(cfg, root, true)?;
+    // Stage 2: with those choices fixed, the shortest plan as robust (a linear program).
+    let mut short = Built::new(task, start, cfg)?;
+    debug_assert_eq!(short.program.binaries.len(), choices.len(), "the encoding is deterministic");
+    for (b, v) in short.program.binaries.clone().into_iter().zip(choices) {
+        short.program.constraints.push(Expression::from(b).eq(v.round()));
+    }
+    // A hair below the optimum, so rounding in the first solve cannot make it infeasible.
+    let floor = best - 1e-7 * (1.0 + best.abs());
+    short.program.constraints.push(short.root.clone().geq(floor));
+    let length = short.length(cfg);
+    let (_, (waypoints, _, program_robustness)) = short.solve(cfg, -length, false)?;
+    let mut path = start.to_vec();
+    path.extend(waypoints);
+    let robustness = task.spec().robustness(&path, &Semantics::hard())?;
+    Ok(MipPlan {
+        path,
+        robustness,
+        program_robustness,
+        optimal: matches!(status, SolutionStatus::Optimal),
+        seconds: t0.elapsed().as_secs_f64(),
+        binaries,
+        constraints,
+    })
+}
+
+/// A task's program from one start, and the expression of its root's robustness.
+struct Built {
+    program: encode::Program,
+    root: Expression,
+}
+
+/// What a solve gives: waypoints, the binaries' values, the root's value.
+type Solved = (Vec<f64>, Vec<f64>, f64);
+
+impl Built {
+    fn new(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<Built, MipError> {
+        let (lo, hi) = task.map.region();
+        let mut program =
+            encode::Program::new([start[0], start[1]], task.steps, ([lo[0], lo[1]], [hi[0], hi[1]]));
+        let atoms = geometry::Atoms::of_task(task, start, cfg.sides, cfg.outside_sides)?;
+        let formula = task.planning_formula();
+        let root = encode::Encoder::new(&mut program, &atoms, UNTIL, Semantics::hard().top)
+            .encode(&formula, 0, true)?;
+        let root = match root {
+            encode::Rob::Const(c) => Expression::from(c),
+            encode::Rob::Lin { e, .. } => e,
+        };
+        Ok(Built { program, root })
+    }
+
+    /// The plan's 1-norm length `Σ |x_t − x_{t−1}|` through `s ≥ ±(x_t − x_{t−1})`, with
+    /// the step bound `s ≤ max_step`.
+    fn length(&mut self, cfg: &MipConfig) -> Expression {
+        let p = &mut self.program;
+        let mut length = Expression::from(0.0);
+        let mut prev: Vec<Expression> = p.start().iter().map(|&c| Expression::from(c)).collect();
+        for x in p.x.clone() {
+            for k in 0..2 {
+                let s = p.vars.add(good_lp::variable().min(0.0).max(cfg.max_step));
+                let step = Expression::from(x[k]) - prev[k].clone();
+                p.constraints.push(step.clone().leq(s));
+                p.constraints.push((-step).leq(s));
+                length += s;
+                prev[k] = x[k].into();
+            }
+        }
+        length
+    }
+
+    /// Maximises `objective`; with `bound_steps`, adds the step bound first (the
+    /// second stage's length term carries it).
+    fn solve(
+        mut self,
+        cfg: &MipConfig,
+        objective: Expression,
+        bound_steps: bool,
+    ) -> Result<(SolutionStatus, Solved), MipError> {
+        if bound_steps {
+            self.bound_steps(cfg);
+        }
+        let Built { program, root } = self;
+        let encode::Program { vars, constraints, x, binaries, .. } = program;
+        let unsolved = vars.maximise(objective);
+        match cfg.solver {
+            MipSolver::Microlp => {
+                let model =
+                    unsolved.using(good_lp::microlp).with_time_limit(cfg.time_limit).with_all(constraints);
+                solution_of(model.solve(), cfg, |s| (s.status(), read(s, &x, &binaries, &root)))
+            }
+            #[cfg(feature = "highs")]
+            MipSolver::Highs => {
+                let model = unsolved
+                    .using(good_lp::highs)
+                    .set_threads(1)
+                    .set_verbose(false)
+                    .with_time_limit(cfg.time_limit)
+                    .with_all(constraints);
+                solution_of(model.solve(), cfg, |s| (s.status(), read(s, &x, &binaries, &root)))
+            }
+        }
+    }
+
+    /// `|x_t − x_{t−1}| ≤ max_step` per coordinate.
+    fn bound_steps(&mut self, cfg: &MipConfig) {
+        let p = &mut self.program;
+        let mut prev: Vec<Expression> = p.start().iter().map(|&c| Expression::from(c)).collect();
+        for x in p.x.clone() {
+            for k in 0..2 {
+                let step = Expression::from(x[k]) - prev[k].clone();
+                p.constraints.push(step.clone().leq(cfg.max_step));
+                p.constraints.push(step.geq(-cfg.max_step));
+                prev[k] = x[k].into();
+            }
+        }
+    }
+}
+
+/// The waypoints, the binaries and the root's value in a solution.
+fn read(
+    s: &impl Solution,
+    x: &[[good_lp::Variable; 2]],
+    binaries: &[good_lp::Variable],
+    root: &Expression,
+) -> Solved {
+    let waypoints = x.iter().flat_map(|w| [s.value(w[0]), s.value(w[1])]).collect();
+    (waypoints, binaries.iter().map(|&b| s.value(b)).collect(), s.eval(root))
+}
+
+/// The solver's answer, or the error that says what went wrong.
+fn solution_of<S, T>(
+    solved: Result<S, ResolutionError>,
+    cfg: &MipConfig,
+    take: impl FnOnce(&S) -> T,
+) -> Result<T, MipError> {
+    let solver = cfg.solver.name();
+    match solved {
+        Ok(s) => Ok(take(&s)),
+        Err(ResolutionError::Other(m)) if m.contains("Time limit") => Err(MipError::TimeOut(cfg.time_limit)),
+        // Every program built here is feasible (any plan has some robustness) and
+        // bounded (every variable is), so these are numerical failures.
+        Err(ResolutionError::Infeasible) => Err(MipError::Solver {
+            solver,
+            message: "reported the program infeasible (a numerical failure)".into(),
+        }),
+        Err(ResolutionError::Unbounded) => Err(MipError::Solver {
+            solver,
+            message: "reported the program unbounded (a numerical failure)".into(),
+        }),
+        Err(e) => Err(MipError::Solver { solver, message: e.to_string() }),
+    }
+}
