@@ -105,3 +105,59 @@ fn time_compares_the_network_with_the_gradient_planner() {
     let o = schrl(&["plan", "time", "--ckpt", out, "--n", "0"]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--n"));
 }
+
+#[test]
+fn mip_plans_write_a_file_say_their_robustness_and_refuse_bad_input() {
+    let dir = std::env::temp_dir().join(format!("schrl-plan-mip-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let plan = dir.join("plan.json");
+    let p = plan.to_str().unwrap();
+    let o = schrl(&["plan", "mip", "--task", "branch", "--start", "1.5,-1.5", "--out", p]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Branch's goals have radius 0.6: the most robust plan visits both centres.
+    assert!((last_value(&o, "robustness:") - 0.6).abs() < 1e-3);
+    assert!(last_value(&o, "solve seconds:") > 0.0);
+    let saved: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&plan).unwrap()).unwrap();
+    assert_eq!(saved["waypoints"].as_array().unwrap().len(), 5, "{saved}");
+    assert_eq!(saved["waypoints"][0], serde_json::json!([1.5, -1.5]));
+    // Not over the file without --force.
+    let o = schrl(&["plan", "mip", "--task", "branch", "--start", "1.5,-1.5", "--out", p]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--force"));
+    // Timing from drawn starts, as Table 5.
+    let o = schrl(&["plan", "mip", "--task", "seq", "--n", "3"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("3/3 satisfy"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    assert!(last_value(&o, "mip seconds per plan:") > 0.0);
+    // A spec no plan satisfies: in two discs 4 m apart at the same waypoint.
+    std::fs::write(dir.join("two.stl"), "F[1,1] a & F[1,1] b\n").unwrap();
+    std::fs::write(
+        dir.join("two.toml"),
+        "name = \"two\"\nrobot = \"point\"\nmap = \"empty\"\nspec = \"two.stl\"\nsteps = 2\nstep_limit = 100\n\
+         safe_radius = 0.1\n[start]\nlow = [0.0, 0.0]\nhigh = [0.0, 0.0]\n\
+         [[goal]]\nname = \"a\"\ncenter = [2.0, 0.0]\nradius = 0.5\n\
+         [[goal]]\nname = \"b\"\ncenter = [-2.0, 0.0]\nradius = 0.5\n",
+    )
+    .unwrap();
+    let two = dir.join("two.toml");
+    let o = schrl(&["plan", "mip", "--task", two.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("infeasible") && err.contains("-1.5"), "{err}");
+    let bad = |args: &[&str], says: &str| {
+        let o = schrl(&[&["plan", "mip"], args].concat());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(says), "{args:?}: {err}");
+    };
+    bad(&["--task", "seq", "--start", "0,0"], "inside an obstacle");
+    bad(&["--task", "seq", "--start", "1,2,3"], "give 2 numbers");
+    bad(&["--task", "seq", "--start", "9,0"], "outside the walls map's region");
+    bad(&["--task", "seq", "--start", "x,0"], "'x' in 'x,0' is not a number");
+    bad(&["--task", "seq", "--robot", "drone"], "2-D");
+    bad(&["--task", "seq", "--max-step", "0"], "--max-step");
+    bad(&["--task", "seq", "--solver", "gurobi"], "unknown solver 'gurobi'");
+    bad(&["--task", "seq", "--n", "2", "--out", p], "drop --start, --out and --picture");
+}

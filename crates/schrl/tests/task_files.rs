@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use rand::SeedableRng;
 use schrl::task::{TASK_ROBOTS, Task, TaskKind};
 
 fn repo_tasks() -> PathBuf {
@@ -268,4 +269,19 @@ fn drone_loop_can_only_bounce_between_two_goals() {
     assert!(bounce(0, 2) < -0.3 && bounce(1, 2) < -0.3, "{} {}", bounce(0, 2), bounce(1, 2));
     let cycle: Vec<f64> = (0..=t.steps).flat_map(|k| goals[k % 3]).collect();
     assert!(planned.spec().robustness(&cycle, &stl::Semantics::hard()).unwrap() < 0.0);
+}
+
+#[test]
+fn a_fixed_start_is_drawn_without_panicking() {
+    // A start region with low = high in a dimension once panicked ("cannot sample empty
+    // range") in every command that draws starts.
+    let toml = Task::point(TaskKind::Seq)
+        .toml
+        .replace("low = [1.0, -2.0]\nhigh = [2.0, -1.0]", "low = [1.5, -2.0]\nhigh = [1.5, -1.0]")
+        .replace("spec = \"seq.stl\"", "spec = \"t.stl\"");
+    let t = load(&toml, &Task::point(TaskKind::Seq).spec).unwrap();
+    assert_eq!(t.start.0[0], t.start.1[0], "the replacement took");
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    let starts: Vec<Vec<f32>> = t.sample_starts(&mut rng, 50).unwrap().to_vec2().unwrap();
+    assert!(starts.iter().all(|s| s[0] == 1.5 && (-2.0..-1.0).contains(&s[1])), "{starts:?}");
 }

@@ -95,15 +95,19 @@ pub struct MipArgs {
     task: String,
     /// Start position `x,y`; without it, one drawn from the task's start region.
     #[arg(long, value_parser = parse_start, allow_hyphen_values = true)]
-    start: Option<Vec<f64>>,
+    start: Option<StartPoint>,
     /// Seed of the drawn start.
     #[arg(long, default_value_t = 1)]
     seed: u64,
     #[command(flatten)]
     mip: MipFlags,
-    /// The plan (JSON: waypoints, robustness, solve time).
+    /// Plan from this many starts drawn from the task's start region (the starts of
+    /// `plan time --n N --seed S`) and report seconds per plan and plans satisfying.
+    #[arg(long, default_value_t = 1, value_parser = super::count::<1, 100_000>)]
+    n: usize,
+    /// Write the plan (JSON: waypoints, robustness, solve time).
     #[arg(long)]
-    out: PathBuf,
+    out: Option<PathBuf>,
     /// Also draw the plan on the map (PNG or SVG).
     #[arg(long)]
     picture: Option<PathBuf>,
@@ -112,7 +116,11 @@ pub struct MipArgs {
     force: bool,
 }
 
-fn parse_start(s: &str) -> Result<Vec<f64>, String> {
+/// A position given on the command line (`x,y`).
+#[derive(Clone, Debug)]
+struct StartPoint(Vec<f64>);
+
+fn parse_start(s: &str) -> Result<StartPoint, String> {
     let v: Vec<f64> = s
         .split(',')
         .map(|x| x.trim().parse::<f64>().map_err(|_| format!("'{x}' in '{s}' is not a number")))
@@ -120,7 +128,7 @@ fn parse_start(s: &str) -> Result<Vec<f64>, String> {
     if v.iter().any(|x| !x.is_finite()) {
         return Err(format!("'{s}' has a number that is not finite"));
     }
-    Ok(v)
+    Ok(StartPoint(v))
 }
 
 /// Arguments of `schrl plan compare`.
@@ -162,6 +170,22 @@ pub struct CheckpointStarts {
 pub struct TimeArgs {
     #[command(flatten)]
     from: CheckpointStarts,
+    /// Planners to time, comma-separated: network, gradient, mip.
+    #[arg(long, value_delimiter = ',', default_value = "network,gradient,mip")]
+    planners: Vec<TimedPlanner>,
+    #[command(flatten)]
+    mip: MipFlags,
+}
+
+/// A planner `schrl plan time` can time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum TimedPlanner {
+    /// The trained network's deployed mean path.
+    Network,
+    /// The gradient planner.
+    Gradient,
+    /// The MIP planner.
+    Mip,
 }
 
 /// Arguments of `schrl plan train`. With `--resume`, flags left out take the saved
@@ -445,6 +469,7 @@ fn time(args: TimeArgs) -> Result<()> {
     if args.from.n == 0 {
         bail!("--n must be at least 1");
     }
+    let mip_cfg = args.mip.config()?;
     let loaded = store::planner::load(&args.from.ckpt).map_err(super::store_error)?;
     let task = &loaded.task;
     let spec = task.spec();
@@ -453,43 +478,97 @@ fn time(args: TimeArgs) -> Result<()> {
     let starts: Vec<Vec<f64>> =
         task.sample_starts(&mut rng, args.from.n)?.to_dtype(candle_core::DType::F64)?.to_vec2()?;
     let hard = Semantics::hard();
+    let n = args.from.n;
+    println!("task: {} (T = {}), {n} starts", task.name, task.steps);
+    // A line to read, and one for scripts (`<key> seconds per plan: <mean>`).
+    let report = |name: &str, key: &str, seconds: &[f64], ok: usize, note: &str| {
+        let (m, s) = mean_std(seconds);
+        println!("{name}: {m:.3e} ± {s:.1e} s per plan, {ok}/{n} satisfy{note}");
+        println!("{key} seconds per plan: {m:.3e}");
+    };
 
-    // The network: each plan timed alone (mean of n, as Table 5), after one warm-up.
-    let (mut scratch, mut path) = (PlanScratch::default(), Vec::new());
-    deployed.mean_path_into(&starts[0], task.steps, &mut scratch, &mut path);
-    let (mut net_us, mut net_ok) = (Vec::with_capacity(args.from.n), 0);
-    for s in &starts {
-        let t0 = std::time::Instant::now();
-        deployed.mean_path_into(s, task.steps, &mut scratch, &mut path);
-        net_us.push(t0.elapsed().as_secs_f64() * 1e6);
-        net_ok += (spec.robustness(&path, &hard)? > 0.0) as usize;
+    if args.planners.contains(&TimedPlanner::Network) {
+        // Each plan timed alone (mean of n, as Table 5), after one warm-up.
+        let (mut scratch, mut path) = (PlanScratch::default(), Vec::new());
+        deployed.mean_path_into(&starts[0], task.steps, &mut scratch, &mut path);
+        let (mut secs, mut ok) = (Vec::with_capacity(n), 0);
+        for s in &starts {
+            let t0 = std::time::Instant::now();
+            deployed.mean_path_into(s, task.steps, &mut scratch, &mut path);
+            secs.push(t0.elapsed().as_secs_f64());
+            ok += (spec.robustness(&path, &hard)? > 0.0) as usize;
+        }
+        report("network (deployed mean path)", "network", &secs, ok, "");
     }
-
-    let bar = ProgressBar::new(args.from.n as u64);
-    bar.set_style(
-        ProgressStyle::with_template("gradient planner {bar:40} {pos}/{len}").expect("valid template"),
-    );
-    let cfg = GradientPlannerConfig::default();
-    let (mut grad_ms, mut grad_ok) = (Vec::with_capacity(args.from.n), 0);
-    for s in &starts {
-        let t0 = std::time::Instant::now();
-        let p = gradient_planner::plan(task, &spec, s, &cfg, &mut rng)?;
-        grad_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-        grad_ok += p.satisfied() as usize;
-        bar.inc(1);
+    if args.planners.contains(&TimedPlanner::Gradient) {
+        let bar = timing_bar(n, "gradient planner");
+        let cfg = GradientPlannerConfig::default();
+        let (mut secs, mut ok) = (Vec::with_capacity(n), 0);
+        for s in &starts {
+            let t0 = std::time::Instant::now();
+            let p = gradient_planner::plan(task, &spec, s, &cfg, &mut rng)?;
+            secs.push(t0.elapsed().as_secs_f64());
+            ok += p.satisfied() as usize;
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        let note = format!(" (at most {} attempts of {} steps)", cfg.restarts, cfg.iterations);
+        report("gradient planner", "gradient", &secs, ok, &note);
     }
-    bar.finish_and_clear();
-    let (nm, ns) = mean_std(&net_us);
-    let (gm, gs) = mean_std(&grad_ms);
-    println!("task: {} (T = {}), {} starts", task.name, task.steps, args.from.n);
-    println!("network (deployed mean path): {nm:.2} ± {ns:.2} µs per plan, {net_ok}/{} satisfy", args.from.n);
-    println!(
-        "gradient planner: {gm:.2} ± {gs:.2} ms per plan, {grad_ok}/{} satisfy (at most {} attempts of {} steps)",
-        args.from.n, cfg.restarts, cfg.iterations
-    );
-    println!("network seconds per plan: {:.3e}", nm * 1e-6);
-    println!("gradient seconds per plan: {:.3e}", gm * 1e-3);
+    if args.planners.contains(&TimedPlanner::Mip) {
+        let t = MipTimes::of(task, &starts, &mip_cfg)?;
+        report("MIP planner", "mip", &t.seconds, t.satisfied, &t.note(&mip_cfg));
+    }
     Ok(())
+}
+
+/// The MIP planner timed from each of some starts.
+struct MipTimes {
+    seconds: Vec<f64>,
+    satisfied: usize,
+    proved: usize,
+    rounds: usize,
+}
+
+impl MipTimes {
+    fn of(task: &Task, starts: &[Vec<f64>], cfg: &MipConfig) -> Result<MipTimes> {
+        let bar = timing_bar(starts.len(), "MIP planner");
+        let mut t = MipTimes { seconds: vec![], satisfied: 0, proved: 0, rounds: 0 };
+        for s in starts {
+            match mip::plan(task, s, cfg) {
+                Ok(p) => {
+                    t.seconds.push(p.seconds);
+                    t.satisfied += p.satisfied() as usize;
+                    t.proved += p.optimal as usize;
+                    t.rounds += p.rounds;
+                }
+                // No plan in time: unsatisfied, at the limit.
+                Err(mip::MipError::TimeOut(limit)) => t.seconds.push(limit),
+                Err(e) => return Err(e.into()),
+            }
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        Ok(t)
+    }
+
+    fn note(&self, cfg: &MipConfig) -> String {
+        let n = self.seconds.len();
+        format!(
+            " ({}; {}/{n} proved optimal, {:.1} rounds per plan)",
+            cfg.solver.name(),
+            self.proved,
+            self.rounds as f64 / n.max(1) as f64
+        )
+    }
+}
+
+fn timing_bar(n: usize, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(n as u64);
+    bar.set_style(
+        ProgressStyle::with_template(&format!("{what} {{bar:40}} {{pos}}/{{len}}")).expect("valid template"),
+    );
+    bar
 }
 
 fn compare(args: CompareArgs) -> Result<()> {
@@ -559,10 +638,16 @@ fn start_for(task: &Task, given: Option<&[f64]>, seed: u64) -> Result<Vec<f64>> 
 fn mip(args: MipArgs) -> Result<()> {
     let task = super::task::resolve(args.robot, &args.task)?;
     let cfg = args.mip.config()?;
-    let start = start_for(&task, args.start.as_deref(), args.seed)?;
+    if args.n > 1 {
+        return mip_many(&task, &cfg, &args);
+    }
+    let start = start_for(&task, args.start.as_ref().map(|s| &s.0[..]), args.seed)?;
     // Outputs are checked before the solve, which can take a while.
-    if args.out.exists() && !args.force {
-        return Err(super::store_error(schrl::store::StoreError::FileExists(args.out.clone())));
+    if let Some(out) = &args.out
+        && out.exists()
+        && !args.force
+    {
+        return Err(super::store_error(schrl::store::StoreError::FileExists(out.clone())));
     }
     if let Some(p) = &args.picture {
         sim::render::check_target(p, args.force)?;
@@ -574,12 +659,14 @@ fn mip(args: MipArgs) -> Result<()> {
     spinner.finish_and_clear();
     let plan = plan?;
     println!(
-        "program: {} binaries, {} constraints; {}",
+        "program: {} binaries, {} constraints, {} round{}; {}",
         plan.binaries,
         plan.constraints,
+        plan.rounds,
+        if plan.rounds == 1 { "" } else { "s" },
         if plan.optimal { "solved to optimality" } else { "time limit reached: best plan found so far" }
     );
-    println!("solve time: {:.3} s", plan.seconds);
+    println!("solve seconds: {:.3}", plan.seconds);
     println!("program robustness: {:.4}", plan.program_robustness);
     println!("robustness: {:.4}", plan.robustness);
     if !plan.satisfied() {
@@ -607,18 +694,36 @@ fn mip(args: MipArgs) -> Result<()> {
         sim::render::save(&scene, p, args.force)?;
         println!("wrote {}", p.display());
     }
-    let file = schrl::store::plan_file::PlanFile {
-        planner: "mip".into(),
-        task: task.name.clone(),
-        robot: task.robot.name().into(),
-        waypoints,
-        robustness: plan.robustness,
-        program_robustness: plan.program_robustness,
-        optimal: plan.optimal,
-        seconds: plan.seconds,
-        solver: cfg.solver.name().into(),
-    };
-    schrl::store::plan_file::save(&file, &args.out, args.force).map_err(super::store_error)?;
-    println!("wrote {}", args.out.display());
+    if let Some(out) = &args.out {
+        let file = schrl::store::plan_file::PlanFile {
+            planner: "mip".into(),
+            task: task.name.clone(),
+            robot: task.robot.name().into(),
+            waypoints,
+            robustness: plan.robustness,
+            program_robustness: plan.program_robustness,
+            optimal: plan.optimal,
+            seconds: plan.seconds,
+            solver: cfg.solver.name().into(),
+        };
+        schrl::store::plan_file::save(&file, out, args.force).map_err(super::store_error)?;
+        println!("wrote {}", out.display());
+    }
+    Ok(())
+}
+
+/// `plan mip --n N`: one plan from each of N starts, timed (Table 5's MIP column).
+fn mip_many(task: &Task, cfg: &MipConfig, args: &MipArgs) -> Result<()> {
+    if args.start.is_some() || args.out.is_some() || args.picture.is_some() {
+        bail!("--n {} plans from drawn starts and reports times; drop --start, --out and --picture", args.n);
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
+    let starts: Vec<Vec<f64>> =
+        task.sample_starts(&mut rng, args.n)?.to_dtype(candle_core::DType::F64)?.to_vec2()?;
+    let t = MipTimes::of(task, &starts, cfg)?;
+    let (m, sd) = mean_std(&t.seconds);
+    println!("task: {} (T = {}), {} starts (seed {})", task.name, task.steps, args.n, args.seed);
+    println!("MIP planner: {m:.3e} ± {sd:.1e} s per plan, {}/{} satisfy{}", t.satisfied, args.n, t.note(cfg));
+    println!("mip seconds per plan: {m:.3e}");
     Ok(())
 }

@@ -302,6 +302,9 @@ pub struct EvalArgs {
     /// (waypoints optimised directly on the spec the network planned for, App. J).
     #[arg(long, value_enum, default_value_t = PlannerChoice::Network)]
     planner: PlannerChoice,
+    /// The MIP planner's settings (with `--planner mip`).
+    #[command(flatten)]
+    mip: super::plan::MipFlags,
     /// Drive with this `schrl control train` run's controller instead of the run's
     /// (e.g. DIR/general: the general controller before joint training).
     #[arg(long)]
@@ -315,6 +318,8 @@ enum PlannerChoice {
     Network,
     /// The gradient planner baseline.
     Gradient,
+    /// The mixed-integer planner (most robust plan per start).
+    Mip,
 }
 
 fn bar(len: u64, what: &str) -> Result<ProgressBar> {
@@ -558,13 +563,14 @@ pub fn eval(args: EvalArgs) -> Result<()> {
         bail!("--groups and --per-group must be at least 1");
     }
     let t = store::joint::load(&args.ckpt).map_err(super::store_error)?;
-    if args.sampled_plans && args.planner == PlannerChoice::Gradient {
-        bail!("--sampled-plans samples the network's plans; it does not go with --planner gradient");
+    if args.sampled_plans && args.planner != PlannerChoice::Network {
+        bail!("--sampled-plans samples the network's plans; it goes with --planner network only");
     }
     let plans = match (args.planner, args.sampled_plans) {
         (PlannerChoice::Gradient, _) => {
             Plans::Gradient { task: t.plan.task(), config: GradientPlannerConfig::default() }
         }
+        (PlannerChoice::Mip, _) => Plans::Mip { task: t.plan.task(), config: args.mip.config()? },
         (PlannerChoice::Network, true) => Plans::Sampled(t.plan.planner()),
         (PlannerChoice::Network, false) => Plans::Mean(t.plan.planner()),
     };

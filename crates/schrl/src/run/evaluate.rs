@@ -17,6 +17,7 @@ use super::execute::{Execution, Outcome, WaypointDispatcher, start_run, task_env
 use super::joint::paths_of;
 use crate::control::Controller;
 use crate::plan::gradient_planner::{self, GradientPlannerConfig};
+use crate::plan::mip::{self, MipConfig};
 use crate::plan::planner::PathPlanner;
 use crate::task::Task;
 
@@ -84,6 +85,14 @@ pub enum Plans<'a> {
         /// Its settings.
         config: GradientPlannerConfig,
     },
+    /// The MIP planner ([`crate::plan::mip`]): one most robust plan per start for
+    /// `task` (as for the gradient planner, the task the network planned for).
+    Mip {
+        /// The task planned for.
+        task: &'a Task,
+        /// Its settings.
+        config: MipConfig,
+    },
 }
 
 impl Plans<'_> {
@@ -107,6 +116,21 @@ impl Plans<'_> {
                     .map(|s| {
                         let p = gradient_planner::plan(planned, &spec, s, config, rng).map_err(|e| {
                             RunError::Planner(candle_core::Error::Msg(format!("gradient planner: {e}")))
+                        })?;
+                        Ok(p.path.chunks(dim).map(|c| c.to_vec()).collect())
+                    })
+                    .collect::<Result<_, RunError>>()?
+            }
+            Plans::Mip { task: planned, config } => {
+                let starts: Vec<Vec<f64>> = g0.to_dtype(candle_core::DType::F64)?.to_vec2()?;
+                let dim = planned.map.dim();
+                starts
+                    .iter()
+                    .map(|s| {
+                        let p = mip::plan(planned, s, config).map_err(|e| {
+                            RunError::Planner(candle_core::Error::Msg(format!(
+                                "MIP planner from {s:.3?}: {e}"
+                            )))
                         })?;
                         Ok(p.path.chunks(dim).map(|c| c.to_vec()).collect())
                     })

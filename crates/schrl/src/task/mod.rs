@@ -531,11 +531,14 @@ impl Task {
         out
     }
 
-    /// `n` starts drawn uniformly from the start region: `[n, dim]`.
+    /// `n` starts drawn uniformly from the start region: `[n, dim]`. A dimension whose
+    /// low equals its high (a fixed start, which task files allow) is that number, and
+    /// draws nothing from `rng`.
     pub fn sample_starts(&self, rng: &mut ChaCha8Rng, n: usize) -> candle_core::Result<Tensor> {
         let (lo, hi) = &self.start;
         let dim = lo.len();
-        let v: Vec<f32> = (0..n * dim).map(|i| rng.random_range(lo[i % dim]..hi[i % dim]) as f32).collect();
+        let mut draw = |l: f64, h: f64| if l < h { rng.random_range(l..h) } else { l };
+        let v: Vec<f32> = (0..n * dim).map(|i| draw(lo[i % dim], hi[i % dim]) as f32).collect();
         Tensor::from_vec(v, (n, dim), &Device::Cpu)
     }
 
@@ -549,13 +552,20 @@ impl Task {
     /// The spec for single paths (plain Rust, exact gradients), avoid regions along
     /// the segments ([`along`]).
     pub fn spec(&self) -> Spec {
+        self.spec_of(self.planning_formula())
+    }
+
+    /// The spec of `formula`, a part of [`Task::planning_formula`], with the task's
+    /// bindings (e.g. to judge one clause of a plan).
+    ///
+    /// # Panics
+    /// If `formula` names something the task does not bind.
+    pub fn spec_of(&self, formula: Formula) -> Spec {
         let dim = self.map.dim();
         self.predicates()
             .into_iter()
             .chain(along::planning_bindings(self))
-            .fold(Spec::builder(self.planning_formula()).state_dim(dim).until(UNTIL), |b, (n, p)| {
-                b.bind_shared(n, p)
-            })
+            .fold(Spec::builder(formula).state_dim(dim).until(UNTIL), |b, (n, p)| b.bind_shared(n, p))
             .build()
             .expect("task names are checked when the task is loaded")
     }

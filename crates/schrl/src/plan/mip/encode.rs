@@ -17,11 +17,20 @@
 //! until readings, so the program's robustness is that of [`stl::Spec`] with the
 //! predicates replaced by their [`Shape`]s.
 //!
+//! Clauses that keep out of a goal (they negate one, e.g. Loop's `l0 → ¬○l0`) and look at
+//! one waypoint and its next (no `◇`, `□`, `U` inside) are *lazy* where they are
+//! operands of a conjunction in positive position: until a round of
+//! [`super::plan`] finds a plan that violates one of them at some waypoint, that
+//! occurrence is left out (read as `⊤`). Leaving out a conjunct only raises the
+//! optimum, and the robustness is monotone in every positive occurrence, so a plan
+//! whose left-out occurrences are all at least the optimum `ρ*` has robustness at
+//! least `ρ*` (for any min-max formula, `f(s ∧ c) ≥ f(s) ∧ c`).
+//!
 //! Every value carries an interval `[lo, hi]` from the plan region, so each big-M is
 //! the tightest the interval allows (`Mᵢ = hi(r) − lo(rᵢ)`), and operands that can
 //! never decide a `min` or `max` are dropped before they cost a binary.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use good_lp::{Constraint, Expression, ProblemVariables, Variable, variable};
 use stl::{Formula, Interval, UntilRule};
@@ -189,10 +198,43 @@ impl Program {
     }
 }
 
+/// An occurrence of a sub-formula at a waypoint: its address in the encoded formula
+/// (stable while the formula is borrowed) and the waypoint.
+pub(super) type Occurrence = (usize, usize);
+
+fn address(f: &Formula) -> usize {
+    f as *const Formula as usize
+}
+
+/// Whether `f` is a clause that may be left out until violated: it keeps out of a
+/// goal (negates) and reads only its waypoint and the next ones. (`safe` is always
+/// encoded: through the walls' few free cells it is cheap, and left out it cost
+/// rounds.)
+fn lazy_kind(f: &Formula) -> bool {
+    fn local(f: &Formula) -> bool {
+        match f {
+            Formula::Eventually(..) | Formula::Globally(..) | Formula::Until(..) => false,
+            _ => f.children().all(local),
+        }
+    }
+    fn keeps_out(f: &Formula) -> bool {
+        match f {
+            Formula::Not(_) | Formula::Implies(..) => true,
+            Formula::Atom(_) | Formula::Compare { .. } => false,
+            _ => f.children().any(keeps_out),
+        }
+    }
+    local(f) && keeps_out(f)
+}
+
 /// Encodes sub-formulas at waypoints, each (sub-formula, waypoint, sign) once.
 pub(super) struct Encoder<'a> {
     program: &'a mut Program,
     atoms: &'a Atoms,
+    /// Lazy occurrences to encode (the others are left out).
+    active: &'a HashSet<Occurrence>,
+    /// Lazy occurrences left out, with their formula.
+    omitted: Vec<(&'a Formula, usize)>,
     /// States in the path (`T + 1`).
     n: usize,
     until: UntilRule,
@@ -203,9 +245,20 @@ pub(super) struct Encoder<'a> {
 
 impl<'a> Encoder<'a> {
     /// An encoder writing into `program`.
-    pub fn new(program: &'a mut Program, atoms: &'a Atoms, until: UntilRule, top: f64) -> Self {
+    pub fn new(
+        program: &'a mut Program,
+        atoms: &'a Atoms,
+        active: &'a HashSet<Occurrence>,
+        until: UntilRule,
+        top: f64,
+    ) -> Self {
         let n = program.x.len() + 1;
-        Self { program, atoms, n, until, top, memo: HashMap::new() }
+        Self { program, atoms, active, omitted: vec![], n, until, top, memo: HashMap::new() }
+    }
+
+    /// The lazy occurrences left out of the program.
+    pub fn omitted(&self) -> &[(&'a Formula, usize)] {
+        &self.omitted
     }
 
     /// The window `[t + a, t + b]` cut at the last waypoint (the library's rule).
@@ -217,8 +270,8 @@ impl<'a> Encoder<'a> {
     }
 
     /// The robustness of `f` (of `¬f` when `positive` is false) at waypoint `t`.
-    pub fn encode(&mut self, f: &Formula, t: usize, positive: bool) -> Result<Rob, MipError> {
-        let key = (f as *const Formula as usize, t, positive);
+    pub fn encode(&mut self, f: &'a Formula, t: usize, positive: bool) -> Result<Rob, MipError> {
+        let key = (address(f), t, positive);
         if let Some(r) = self.memo.get(&key) {
             return Ok(r.clone());
         }
@@ -238,7 +291,7 @@ impl<'a> Encoder<'a> {
         }
     }
 
-    fn all(&mut self, fs: &[&Formula], at: &[usize], positive: bool) -> Result<Vec<Rob>, MipError> {
+    fn all(&mut self, fs: &[&'a Formula], at: &[usize], positive: bool) -> Result<Vec<Rob>, MipError> {
         let mut out = Vec::with_capacity(fs.len() * at.len());
         for f in fs {
             for &t in at {
@@ -248,8 +301,33 @@ impl<'a> Encoder<'a> {
         Ok(out)
     }
 
-    fn encode_new(&mut self, f: &Formula, t: usize, positive: bool) -> Result<Rob, MipError> {
+    /// The operands of a conjunction (`∧`, `□`) in positive position, lazy ones that
+    /// are not active left out.
+    fn conjuncts(&mut self, fs: &[&'a Formula], at: &[usize]) -> Result<Vec<Rob>, MipError> {
+        let mut out = Vec::with_capacity(fs.len() * at.len());
+        for &f in fs {
+            for &t in at {
+                if lazy_kind(f) && !self.active.contains(&(address(f), t)) {
+                    if !self.omitted.iter().any(|&(g, u)| address(g) == address(f) && u == t) {
+                        self.omitted.push((f, t));
+                    }
+                } else {
+                    out.push(self.encode(f, t, true)?);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    fn encode_new(&mut self, f: &'a Formula, t: usize, positive: bool) -> Result<Rob, MipError> {
         let sign = if positive { 1.0 } else { -1.0 };
+        if self.is_max(f, positive) {
+            // One disjunction over all the options of nested ones (fewer binaries, and
+            // no big-M between the levels).
+            let mut options = vec![];
+            self.options(f, t, positive, &mut options)?;
+            return Ok(self.combine(false, true, options));
+        }
         Ok(match f {
             Formula::True => Rob::Const(sign * self.top),
             Formula::False => Rob::Const(-sign * self.top),
@@ -260,6 +338,10 @@ impl<'a> Encoder<'a> {
                 self.atom(signal, t, s, -s * threshold)?
             }
             Formula::Not(c) => self.encode(c, t, !positive)?,
+            Formula::And(v) if positive => {
+                let items = self.conjuncts(&v.iter().collect::<Vec<_>>(), &[t])?;
+                self.combine(true, positive, items)
+            }
             Formula::And(v) => {
                 let items = self.all(&v.iter().collect::<Vec<_>>(), &[t], positive)?;
                 self.combine(true, positive, items)
@@ -281,7 +363,8 @@ impl<'a> Encoder<'a> {
             }
             Formula::Globally(iv, c) => {
                 let at: Vec<usize> = self.window(t, iv).collect();
-                let items = self.all(&[c], &at, positive)?;
+                let items =
+                    if positive { self.conjuncts(&[c], &at)? } else { self.all(&[c], &at, positive)? };
                 self.combine(true, positive, items)
             }
             Formula::Until(iv, l, r) => {
@@ -311,5 +394,66 @@ impl<'a> Encoder<'a> {
     fn atom(&mut self, name: &str, t: usize, sign: f64, offset: f64) -> Result<Rob, MipError> {
         let shape = self.atoms.shape(name, t, sign, offset)?;
         Ok(self.program.shape(&shape))
+    }
+
+    /// Whether `f` (negated unless `positive`) is a `max` of its operands.
+    fn is_max(&self, f: &Formula, positive: bool) -> bool {
+        matches!(
+            (f, positive),
+            (Formula::Or(_) | Formula::Implies(..) | Formula::Eventually(..), true)
+                | (Formula::And(_) | Formula::Globally(..), false)
+        )
+    }
+
+    /// The operands of the `max` that `f` is, with nested `max`es (of sub-formulas and
+    /// of predicates' pieces) spread out into their own operands.
+    fn options(
+        &mut self,
+        f: &'a Formula,
+        t: usize,
+        positive: bool,
+        out: &mut Vec<Rob>,
+    ) -> Result<(), MipError> {
+        let sign = if positive { 1.0 } else { -1.0 };
+        match f {
+            Formula::Not(c) => self.options(c, t, !positive, out)?,
+            Formula::Next(c) => self.options(c, (t + 1).min(self.n - 1), positive, out)?,
+            Formula::Or(v) | Formula::And(v) if self.is_max(f, positive) => {
+                for c in v {
+                    self.options(c, t, positive, out)?;
+                }
+            }
+            Formula::Implies(l, r) if positive => {
+                self.options(l, t, false, out)?;
+                self.options(r, t, true, out)?;
+            }
+            Formula::Eventually(iv, c) | Formula::Globally(iv, c) if self.is_max(f, positive) => {
+                for k in self.window(t, iv) {
+                    self.options(c, k, positive, out)?;
+                }
+            }
+            Formula::Atom(name) => self.atom_options(name, t, sign, 0.0, out)?,
+            Formula::Compare { signal, op, threshold } => {
+                let s = sign * op.sign();
+                self.atom_options(signal, t, s, -s * threshold, out)?
+            }
+            _ => out.push(self.encode(f, t, positive)?),
+        }
+        Ok(())
+    }
+
+    fn atom_options(
+        &mut self,
+        name: &str,
+        t: usize,
+        sign: f64,
+        offset: f64,
+        out: &mut Vec<Rob>,
+    ) -> Result<(), MipError> {
+        match self.atoms.shape(name, t, sign, offset)? {
+            Shape::Max(pieces) => out.extend(pieces.iter().map(|p| self.program.shape(p))),
+            shape => out.push(self.program.shape(&shape)),
+        }
+        Ok(())
     }
 }

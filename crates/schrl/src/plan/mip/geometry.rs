@@ -52,8 +52,9 @@ pub(super) enum Shape {
 enum Geometry {
     /// A goal disc, read at waypoints or (an avoid occurrence) along segments.
     Disc { center: [f64; 2], radius: f64, along_segments: bool },
-    /// Clearance from axis-aligned wall boxes `(center, half size)` minus `radius`.
-    Walls { boxes: Vec<([f64; 2], [f64; 2])>, radius: f64, along: SafeAlong },
+    /// Clearance from the map's walls minus `radius`, through the walls' free cells
+    /// (none: an open map).
+    Walls { cells: Vec<Cell>, radius: f64, along: SafeAlong },
     /// A predicate of time alone (the counter).
     OfTime(Arc<dyn Predicate>),
 }
@@ -63,7 +64,6 @@ pub(super) struct Atoms {
     geometry: HashMap<String, Geometry>,
     exact: HashMap<String, Arc<dyn Predicate>>,
     start: Vec<f64>,
-    region: (Vec<f64>, Vec<f64>),
     sides: usize,
     outside_sides: usize,
 }
@@ -98,9 +98,11 @@ impl Atoms {
             geometry
                 .insert(along::along_name(&g.name), Geometry::Disc { center, radius, along_segments: true });
         }
+        let (lo, hi) = task.map.region();
+        let cells = free_cells(&boxes, (&lo, &hi));
         geometry.insert(
             "safe".into(),
-            Geometry::Walls { boxes, radius: task.safe_radius, along: task.safe_along },
+            Geometry::Walls { cells, radius: task.safe_radius, along: task.safe_along },
         );
         let mut exact: HashMap<String, Arc<dyn Predicate>> = HashMap::new();
         for (name, p) in task.predicates().into_iter().chain(along::planning_bindings(task)) {
@@ -109,7 +111,7 @@ impl Atoms {
             }
             exact.insert(name, p);
         }
-        Ok(Atoms { geometry, exact, start: start.to_vec(), region: task.map.region(), sides, outside_sides })
+        Ok(Atoms { geometry, exact, start: start.to_vec(), sides, outside_sides })
     }
 
     /// `sign · value(name) + offset` at waypoint `t` as a shape (`sign` is ±1).
@@ -144,9 +146,9 @@ impl Atoms {
                 });
                 Ok(Shape::Max(pieces.collect()))
             }
-            Geometry::Walls { boxes, radius, along } => {
-                let open = Shape::Const(sign * (OPEN_CLEARANCE) + offset);
-                if boxes.is_empty() {
+            Geometry::Walls { cells, radius, along } => {
+                let open = Shape::Const(sign * OPEN_CLEARANCE + offset);
+                if cells.is_empty() {
                     return Ok(open);
                 }
                 if sign < 0.0 {
@@ -155,17 +157,12 @@ impl Atoms {
                     ));
                 }
                 let ends: &[usize] = if *along == SafeAlong::Segments { &[t - 1, t] } else { &[t] };
-                let region = (&self.region.0[..], &self.region.1[..]);
-                let mut pieces = vec![open];
-                for (c, h) in boxes {
-                    let sides = box_sides(c, h).filter(|(u, d)| side_can_clear(region, *u, *d));
-                    let clear = sides.map(|(u, d)| {
-                        // u·x − d − radius at every end: beyond this side
-                        Shape::Min(ends.iter().map(|&s| affine(&[(s, u)], -d - radius + offset)).collect())
-                    });
-                    pieces.push(Shape::Max(clear.collect()));
-                }
-                Ok(Shape::Min(pieces))
+                // In some cell, every end at least the clearance beyond every side.
+                let in_cell = |cell: &Cell| {
+                    let beyond = cell.iter().flat_map(|&(u, d)| ends.iter().map(move |&s| (s, u, d)));
+                    Shape::Min(beyond.map(|(s, u, d)| affine(&[(s, u)], -d - radius + offset)).collect())
+                };
+                Ok(Shape::Min(vec![open, Shape::Max(cells.iter().map(in_cell).collect())]))
             }
         }
     }
@@ -200,9 +197,99 @@ fn box_sides(c: &[f64; 2], h: &[f64; 2]) -> impl Iterator<Item = ([f64; 2], f64)
     .into_iter()
 }
 
-/// Whether some point of the plan region (`lo`, `hi`) lies beyond the side `u·x > d`:
-/// the others are left out of the disjunction (fewer binaries; the bound stays sound).
-fn side_can_clear((lo, hi): (&[f64], &[f64]), u: [f64; 2], d: f64) -> bool {
-    let reach: f64 = (0..2).map(|k| (u[k] * lo[k]).max(u[k] * hi[k])).sum();
-    reach > d
+/// A convex region free of obstacles: points beyond every side `u·x ≥ d` of the list,
+/// where every obstacle lies behind at least one of them. So a point `δ` beyond every
+/// side is at least `δ` from every obstacle (an obstacle point `q` behind side `s` has
+/// `‖p − q‖ ≥ u_s·(p − q) ≥ δ`), and so is every point of a segment whose ends are.
+pub(super) type Cell = Vec<([f64; 2], f64)>;
+
+/// The free cells of a map of boxes within the plan region: every set of one or two
+/// box sides that has every box behind one of them and room beyond them, less those
+/// another cell contains (compared on a 5 cm grid). On the walls map: the four rooms
+/// (beyond both central bars) and the four door strips (between a central bar's end
+/// and an outer piece), 8 cells where the boxes one at a time need 20 sides.
+pub(super) fn free_cells(boxes: &[([f64; 2], [f64; 2])], (lo, hi): (&[f64], &[f64])) -> Vec<Cell> {
+    if boxes.is_empty() {
+        return vec![];
+    }
+    // Sides some point of the region is beyond.
+    let mut sides: Vec<([f64; 2], f64)> = vec![];
+    for (c, h) in boxes {
+        for (u, d) in box_sides(c, h) {
+            let reach: f64 = (0..2).map(|k| (u[k] * lo[k]).max(u[k] * hi[k])).sum();
+            if reach > d && !sides.contains(&(u, d)) {
+                sides.push((u, d));
+            }
+        }
+    }
+    // Behind the side: the whole box on the other side.
+    let behind = |(u, d): ([f64; 2], f64), (c, h): &([f64; 2], [f64; 2])| {
+        let far: f64 = (0..2).map(|k| u[k] * c[k] + u[k].abs() * h[k]).sum();
+        far <= d + 1e-12
+    };
+    let mut candidates: Vec<Cell> = vec![];
+    for i in 0..sides.len() {
+        for j in i..sides.len() {
+            let cell: Cell = if i == j { vec![sides[i]] } else { vec![sides[i], sides[j]] };
+            if boxes.iter().all(|b| cell.iter().any(|&s| behind(s, b))) {
+                candidates.push(cell);
+            }
+        }
+    }
+    // Depth of each candidate on a grid; drop empty cells and those another covers.
+    let grid: Vec<[f64; 2]> = (0..=140)
+        .flat_map(|i| (0..=140).map(move |j| [i as f64 / 140.0, j as f64 / 140.0]))
+        .map(|[a, b]| [lo[0] + a * (hi[0] - lo[0]), lo[1] + b * (hi[1] - lo[1])])
+        .collect();
+    let depth =
+        |cell: &Cell, p: [f64; 2]| cell.iter().map(|&(u, d)| dot(u, p) - d).fold(f64::INFINITY, f64::min);
+    let depths: Vec<Vec<f64>> =
+        candidates.iter().map(|c| grid.iter().map(|&p| depth(c, p)).collect()).collect();
+    let mut keep = vec![];
+    for (a, da) in depths.iter().enumerate() {
+        if da.iter().all(|&v| v <= 0.0) {
+            continue;
+        }
+        let covered = depths.iter().enumerate().any(|(b, db)| {
+            b != a
+                && da.iter().zip(db).all(|(x, y)| x <= y)
+                && (da.iter().zip(db).any(|(x, y)| x < y) || b < a)
+        });
+        if !covered {
+            keep.push(candidates[a].clone());
+        }
+    }
+    keep
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_walls_map_has_four_rooms_and_four_door_strips() {
+        let walls = sim::map::WallsMap::new();
+        let (lo, hi) = Map::Walls(walls.clone()).region();
+        let cells = free_cells(walls.bars(), (&lo, &hi));
+        assert_eq!(cells.len(), 8, "{cells:?}");
+        // Every cell's depth is a lower bound of the clearance, on a grid.
+        let map = Map::Walls(walls);
+        for cell in &cells {
+            for i in 0..=70 {
+                for j in 0..=70 {
+                    let p = [-3.5 + 0.1 * i as f64, -3.5 + 0.1 * j as f64];
+                    let depth = cell.iter().map(|&(u, d)| dot(u, p) - d).fold(f64::INFINITY, f64::min);
+                    assert!(depth <= map.sdf(&p) + 1e-9 || depth <= 0.0, "{cell:?} at {p:?}");
+                }
+            }
+        }
+        // Each door's middle and each room's middle lies deep in some cell.
+        for p in [[2.0, 0.0], [0.0, 2.0], [-2.0, 0.0], [0.0, -2.0], [2.0, 2.0], [-2.0, -2.0]] {
+            let best = cells
+                .iter()
+                .map(|c| c.iter().map(|&(u, d)| dot(u, p) - d).fold(f64::INFINITY, f64::min))
+                .fold(f64::NEG_INFINITY, f64::max);
+            assert!(best >= 0.75 - 1e-9, "{p:?}: {best}");
+        }
+    }
 }

@@ -23,10 +23,11 @@
 mod encode;
 mod geometry;
 
+use std::collections::{HashMap, HashSet};
 use std::time::Instant;
 
 use good_lp::{Expression, ResolutionError, Solution, SolutionStatus, SolverModel, WithTimeLimit};
-use stl::{EvalError, Semantics};
+use stl::{EvalError, Formula, Semantics, Spec};
 
 use crate::task::{Task, UNTIL};
 
@@ -165,6 +166,8 @@ pub struct MipPlan {
     pub binaries: usize,
     /// Constraints in the program.
     pub constraints: usize,
+    /// Programs solved: one, plus one per round that found left-out clauses violated.
+    pub rounds: usize,
 }
 
 impl MipPlan {
@@ -186,60 +189,105 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
         )));
     }
     let t0 = Instant::now();
-    // Stage 1: the most robust plan (the discrete choices that matter).
-    let most = Built::new(task, start, cfg)?;
-    let binaries = most.program.binaries.len();
-    let constraints = most.program.constraints.len();
-    let root = most.root.clone();
-    let (status, (_, choices, best)) = most.solve(cfg, root, true)?;
-    // Stage 2: with those choices fixed, the shortest plan as robust (a linear program).
-    let mut short = Built::new(task, start, cfg)?;
-    debug_assert_eq!(short.program.binaries.len(), choices.len(), "the encoding is deterministic");
-    for (b, v) in short.program.binaries.clone().into_iter().zip(choices) {
-        short.program.constraints.push(Expression::from(b).eq(v.round()));
+    let formula = task.planning_formula();
+    let atoms = geometry::Atoms::of_task(task, start, cfg.sides, cfg.outside_sides)?;
+    let hard = Semantics::hard();
+    let mut clauses: HashMap<usize, Spec> = HashMap::new();
+    let mut active: HashSet<encode::Occurrence> = HashSet::new();
+    let left = |t0: Instant| (cfg.time_limit - t0.elapsed().as_secs_f64()).max(1e-3);
+    // The plan of the last round, for a time-out in the next.
+    let mut last: Option<MipPlan> = None;
+    let timed_out = |e: &MipError| matches!(e, MipError::TimeOut(_));
+    for round in 1.. {
+        // Stage 1: the most robust plan (the discrete choices that matter).
+        let most = Built::new(task, &formula, &atoms, &active, start)?;
+        let (binaries, constraints) = (most.program.binaries.len(), most.program.constraints.len());
+        let root = most.root.clone();
+        let (status, (_, choices, best)) = match most.solve(cfg, left(t0), root, true) {
+            Err(e) if timed_out(&e) && last.is_some() => return Ok(last.expect("checked")),
+            other => other?,
+        };
+        // Stage 2: with those choices fixed, the shortest plan as robust (a linear program).
+        let mut short = Built::new(task, &formula, &atoms, &active, start)?;
+        debug_assert_eq!(short.program.binaries.len(), choices.len(), "the encoding is deterministic");
+        for (b, v) in short.program.binaries.clone().into_iter().zip(choices) {
+            short.program.constraints.push(Expression::from(b).eq(v.round()));
+        }
+        // A hair below the optimum, so rounding in the first solve cannot make it infeasible.
+        let floor = best - 1e-7 * (1.0 + best.abs());
+        short.program.constraints.push(short.root.clone().geq(floor));
+        let length = short.length(cfg);
+        let omitted = short.omitted.clone();
+        let (_, (waypoints, _, program_robustness)) = match short.solve(cfg, left(t0), -length, false) {
+            Err(e) if timed_out(&e) && last.is_some() => return Ok(last.expect("checked")),
+            other => other?,
+        };
+        let mut path = start.to_vec();
+        path.extend(waypoints);
+        // The clauses left out must hold at least as well as the optimum.
+        let mut violated = 0;
+        for (f, t) in omitted {
+            let spec = clauses.entry(f.0).or_insert_with(|| task.spec_of(f.1.clone()));
+            if spec.robustness_signal(&path, &hard)?[t] < floor {
+                active.insert((f.0, t));
+                violated += 1;
+            }
+        }
+        let robustness = task.spec().robustness(&path, &hard)?;
+        let plan = MipPlan {
+            path,
+            robustness,
+            // With clauses violated, the program's figure is not a bound: report the plan's.
+            program_robustness: if violated == 0 {
+                program_robustness
+            } else {
+                robustness.min(program_robustness)
+            },
+            optimal: violated == 0 && matches!(status, SolutionStatus::Optimal),
+            seconds: t0.elapsed().as_secs_f64(),
+            binaries,
+            constraints,
+            rounds: round,
+        };
+        if violated == 0 || plan.seconds >= cfg.time_limit {
+            return Ok(plan);
+        }
+        last = Some(plan);
     }
-    // A hair below the optimum, so rounding in the first solve cannot make it infeasible.
-    let floor = best - 1e-7 * (1.0 + best.abs());
-    short.program.constraints.push(short.root.clone().geq(floor));
-    let length = short.length(cfg);
-    let (_, (waypoints, _, program_robustness)) = short.solve(cfg, -length, false)?;
-    let mut path = start.to_vec();
-    path.extend(waypoints);
-    let robustness = task.spec().robustness(&path, &Semantics::hard())?;
-    Ok(MipPlan {
-        path,
-        robustness,
-        program_robustness,
-        optimal: matches!(status, SolutionStatus::Optimal),
-        seconds: t0.elapsed().as_secs_f64(),
-        binaries,
-        constraints,
-    })
+    unreachable!("the rounds end by returning")
 }
 
 /// A task's program from one start, and the expression of its root's robustness.
 struct Built {
     program: encode::Program,
     root: Expression,
+    /// Lazy occurrences left out: (address, the clause) and the waypoint.
+    omitted: Vec<((usize, Formula), usize)>,
 }
 
 /// What a solve gives: waypoints, the binaries' values, the root's value.
 type Solved = (Vec<f64>, Vec<f64>, f64);
 
 impl Built {
-    fn new(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<Built, MipError> {
+    fn new(
+        task: &Task,
+        formula: &Formula,
+        atoms: &geometry::Atoms,
+        active: &HashSet<encode::Occurrence>,
+        start: &[f64],
+    ) -> Result<Built, MipError> {
         let (lo, hi) = task.map.region();
         let mut program =
             encode::Program::new([start[0], start[1]], task.steps, ([lo[0], lo[1]], [hi[0], hi[1]]));
-        let atoms = geometry::Atoms::of_task(task, start, cfg.sides, cfg.outside_sides)?;
-        let formula = task.planning_formula();
-        let root = encode::Encoder::new(&mut program, &atoms, UNTIL, Semantics::hard().top)
-            .encode(&formula, 0, true)?;
+        let mut encoder = encode::Encoder::new(&mut program, atoms, active, UNTIL, Semantics::hard().top);
+        let root = encoder.encode(formula, 0, true)?;
+        let omitted =
+            encoder.omitted().iter().map(|&(f, t)| ((f as *const Formula as usize, f.clone()), t)).collect();
         let root = match root {
             encode::Rob::Const(c) => Expression::from(c),
             encode::Rob::Lin { e, .. } => e,
         };
-        Ok(Built { program, root })
+        Ok(Built { program, root, omitted })
     }
 
     /// The plan's 1-norm length `Σ |x_t − x_{t−1}|` through `s ≥ ±(x_t − x_{t−1})`, with
@@ -266,29 +314,27 @@ impl Built {
     fn solve(
         mut self,
         cfg: &MipConfig,
+        time_limit: f64,
         objective: Expression,
         bound_steps: bool,
     ) -> Result<(SolutionStatus, Solved), MipError> {
         if bound_steps {
             self.bound_steps(cfg);
         }
-        let Built { program, root } = self;
+        let Built { program, root, .. } = self;
         let encode::Program { vars, constraints, x, binaries, .. } = program;
         let unsolved = vars.maximise(objective);
         match cfg.solver {
             MipSolver::Microlp => {
                 let model =
-                    unsolved.using(good_lp::microlp).with_time_limit(cfg.time_limit).with_all(constraints);
+                    unsolved.using(good_lp::microlp).with_time_limit(time_limit).with_all(constraints);
                 solution_of(model.solve(), cfg, |s| (s.status(), read(s, &x, &binaries, &root)))
             }
             #[cfg(feature = "highs")]
             MipSolver::Highs => {
-                let model = unsolved
-                    .using(good_lp::highs)
-                    .set_threads(1)
-                    .set_verbose(false)
-                    .with_time_limit(cfg.time_limit)
-                    .with_all(constraints);
+                let mut model = unsolved.using(good_lp::highs).set_threads(1).set_time_limit(time_limit);
+                model.set_verbose(false);
+                let model = model.with_all(constraints);
                 solution_of(model.solve(), cfg, |s| (s.status(), read(s, &x, &binaries, &root)))
             }
         }
@@ -329,7 +375,13 @@ fn solution_of<S, T>(
     let solver = cfg.solver.name();
     match solved {
         Ok(s) => Ok(take(&s)),
-        Err(ResolutionError::Other(m)) if m.contains("Time limit") => Err(MipError::TimeOut(cfg.time_limit)),
+        // microlp's and HiGHS's words for a time limit without any plan.
+        Err(ResolutionError::Other(m)) if m.contains("Time limit") || m.contains("NoSolutionFound") => {
+            Err(MipError::TimeOut(cfg.time_limit))
+        }
+        Err(ResolutionError::Str(m)) if m.contains("NoSolutionFound") => {
+            Err(MipError::TimeOut(cfg.time_limit))
+        }
         // Every program built here is feasible (any plan has some robustness) and
         // bounded (every variable is), so these are numerical failures.
         Err(ResolutionError::Infeasible) => Err(MipError::Solver {
