@@ -204,7 +204,7 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
         let (binaries, constraints) = (most.program.binaries.len(), most.program.constraints.len());
         let root = most.root.clone();
         let (status, (_, choices, best)) = match most.solve(cfg, left(t0), root, true) {
-            Err(e) if timed_out(&e) && last.is_some() => return Ok(last.expect("checked")),
+            Err(e) if timed_out(&e) && last.is_some() => return Ok(out_of_time(last, t0)),
             other => other?,
         };
         // Stage 2: with those choices fixed, the shortest plan as robust (a linear program).
@@ -219,20 +219,21 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
         let length = short.length(cfg);
         let omitted = short.omitted.clone();
         let (_, (waypoints, _, program_robustness)) = match short.solve(cfg, left(t0), -length, false) {
-            Err(e) if timed_out(&e) && last.is_some() => return Ok(last.expect("checked")),
+            Err(e) if timed_out(&e) && last.is_some() => return Ok(out_of_time(last, t0)),
             other => other?,
         };
         let mut path = start.to_vec();
         path.extend(waypoints);
         // The clauses left out must hold at least as well as the optimum.
         let mut violated = 0;
-        for (f, t) in omitted {
+        for (f, t) in &omitted {
             let spec = clauses.entry(f.0).or_insert_with(|| task.spec_of(f.1.clone()));
-            if spec.robustness_signal(&path, &hard)?[t] < floor {
-                active.insert((f.0, t));
+            if spec.robustness_signal(&path, &hard)?[*t] < floor {
+                active.insert((f.0, *t));
                 violated += 1;
             }
         }
+
         let robustness = task.spec().robustness(&path, &hard)?;
         let plan = MipPlan {
             path,
@@ -255,6 +256,13 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
         last = Some(plan);
     }
     unreachable!("the rounds end by returning")
+}
+
+/// The last round's plan, when the next round ran out of time: not optimal, and timed
+/// to now.
+fn out_of_time(last: Option<MipPlan>, t0: Instant) -> MipPlan {
+    let plan = last.expect("only called with a plan");
+    MipPlan { optimal: false, seconds: t0.elapsed().as_secs_f64(), ..plan }
 }
 
 /// A task's program from one start, and the expression of its root's robustness.
