@@ -55,9 +55,6 @@ pub struct MipFlags {
     /// Largest step between waypoints per coordinate, metres.
     #[arg(long, default_value_t = MipConfig::default().max_step)]
     max_step: f64,
-    /// Weight of the plan's 1-norm length against robustness in the objective.
-    #[arg(long, default_value_t = MipConfig::default().length_weight)]
-    length_weight: f64,
 }
 
 impl MipFlags {
@@ -67,7 +64,6 @@ impl MipFlags {
             sides: self.sides,
             outside_sides: self.outside_sides,
             max_step: self.max_step,
-            length_weight: self.length_weight,
             time_limit: self.time_limit,
             solver: self.solver,
         };

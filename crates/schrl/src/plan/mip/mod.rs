@@ -9,9 +9,10 @@
 //!   of each box's sides, at waypoints or along segments as the task checks `safe`
 //!   and its avoid regions. So `ρ̃ ≤ ρ`: a plan with `ρ̃ > 0` satisfies the spec.
 //! * Logic and time: big-M over waypoint indices ([`encode`]), negation pushed down.
-//! * Objective: maximise `ρ̃ − w · L`, with `L` the plan's length in the 1-norm and
-//!   `w` = [`MipConfig::length_weight`] (10⁻³: of plans within a few millimetres of
-//!   the best robustness, the shortest), i.e. robustness first, not shortest path.
+//! * Objective, in two stages: maximise `ρ̃`; then, with the binaries of that optimum
+//!   fixed, minimise the plan's 1-norm length subject to `ρ̃` staying at the optimum (a
+//!   linear program). Robustness first, not the shortest path subject to `ρ ≥ ε`; the
+//!   corner a plan visits is chosen for robustness alone.
 //!
 //! Every plan is checked with the exact hard robustness of the task's spec
 //! ([`MipPlan::robustness`]), which is at least the program's `ρ̃`
@@ -81,8 +82,6 @@ pub struct MipConfig {
     /// Largest step between waypoints, per coordinate (10 m: the planner network's
     /// step bound, reference setup).
     pub max_step: f64,
-    /// Weight `w` of the plan's 1-norm length in the objective.
-    pub length_weight: f64,
     /// Seconds the solver may take; the best plan found by then is returned.
     pub time_limit: f64,
     /// The solver.
@@ -91,14 +90,7 @@ pub struct MipConfig {
 
 impl Default for MipConfig {
     fn default() -> Self {
-        Self {
-            sides: 16,
-            outside_sides: 8,
-            max_step: 10.0,
-            length_weight: 1e-3,
-            time_limit: 60.0,
-            solver: MipSolver::default(),
-        }
+        Self { sides: 16, outside_sides: 8, max_step: 10.0, time_limit: 60.0, solver: MipSolver::default() }
     }
 }
 
@@ -113,9 +105,6 @@ impl MipConfig {
         }
         if !(self.max_step > 0.0 && self.max_step.is_finite()) {
             return Err(format!("mip.max_step: {} is not a positive number of metres", self.max_step));
-        }
-        if !(self.length_weight >= 0.0 && self.length_weight.is_finite()) {
-            return Err(format!("mip.length_weight: {} is not a non-negative number", self.length_weight));
         }
         if !(self.time_limit > 0.0 && self.time_limit.is_finite()) {
             return Err(format!("mip.time_limit: {} is not a positive number of seconds", self.time_limit));
