@@ -148,3 +148,27 @@ fn what_the_encoding_does_not_cover_is_a_clear_error() {
     let e = mip::plan(&walls, &[1.5, -1.5], &bad).unwrap_err();
     assert!(e.to_string().contains("mip.sides"), "{e}");
 }
+
+#[test]
+fn a_robustness_cap_gives_a_shorter_plan_at_least_that_robust() {
+    let task = open("F[1,2] a & F[3,4] b");
+    let length = |p: &mip::MipPlan| {
+        (1..=4)
+            .map(|t| {
+                let (a, b) = (waypoint(p, t - 1), waypoint(p, t));
+                (a[0] - b[0]).hypot(a[1] - b[1])
+            })
+            .sum::<f64>()
+    };
+    let most = plan(&task, [-3.0, -1.0]);
+    let capped =
+        mip::plan(&task, &[-3.0, -1.0], &MipConfig { robustness_cap: Some(0.2), ..MipConfig::default() })
+            .unwrap_or_else(|e| panic!("{e}"));
+    assert!(capped.robustness >= 0.2 - 1e-6 && capped.program_robustness >= 0.2 - 1e-6, "{capped:?}");
+    assert!(capped.robustness < most.robustness);
+    // Each visit 0.3 m short of a centre it no longer has to reach.
+    assert!(length(&capped) < length(&most) - 0.5, "{} vs {}", length(&capped), length(&most));
+    let bad = MipConfig { robustness_cap: Some(-1.0), ..MipConfig::default() };
+    let e = mip::plan(&task, &[-3.0, -1.0], &bad).unwrap_err();
+    assert!(e.to_string().contains("mip.robustness_cap"), "{e}");
+}

@@ -52,6 +52,10 @@ pub struct MipFlags {
     /// Tangent directions (one binary each) for keeping outside a disc.
     #[arg(long, default_value_t = MipConfig::default().outside_sides)]
     outside_sides: usize,
+    /// Maximise robustness only up to this many metres, then shorten the plan (faster;
+    /// default: the most robust plan).
+    #[arg(long)]
+    robustness_cap: Option<f64>,
     /// Largest step between waypoints per coordinate, metres.
     #[arg(long, default_value_t = MipConfig::default().max_step)]
     max_step: f64,
@@ -65,6 +69,7 @@ impl MipFlags {
             outside_sides: self.outside_sides,
             max_step: self.max_step,
             time_limit: self.time_limit,
+            robustness_cap: self.robustness_cap,
             solver: self.solver,
         };
         c.validate().map_err(|e| anyhow::anyhow!("{}", mip_flag(&e)))?;

@@ -12,7 +12,9 @@
 //! * Objective, in two stages: maximise `ρ̃`; then, with the binaries of that optimum
 //!   fixed, minimise the plan's 1-norm length subject to `ρ̃` staying at the optimum (a
 //!   linear program). Robustness first, not the shortest path subject to `ρ ≥ ε`; the
-//!   corner a plan visits is chosen for robustness alone.
+//!   corner a plan visits is chosen for robustness alone. With
+//!   [`MipConfig::robustness_cap`] `ε`, the first stage maximises `min(ρ̃, ε)`: any plan
+//!   at least `ε` robust ends the search, and the second shortens it keeping `ε`.
 //!
 //! Every plan is checked with the exact hard robustness of the task's spec
 //! ([`MipPlan::robustness`]), which is at least the program's `ρ̃`
@@ -84,13 +86,23 @@ pub struct MipConfig {
     pub max_step: f64,
     /// Seconds the solver may take; the best plan found by then is returned.
     pub time_limit: f64,
+    /// Maximise `min(ρ̃, cap)` instead of `ρ̃`: robustness up to the cap, then the
+    /// shortest plan (off by default: the most robust plan).
+    pub robustness_cap: Option<f64>,
     /// The solver.
     pub solver: MipSolver,
 }
 
 impl Default for MipConfig {
     fn default() -> Self {
-        Self { sides: 16, outside_sides: 8, max_step: 10.0, time_limit: 60.0, solver: MipSolver::default() }
+        Self {
+            sides: 16,
+            outside_sides: 8,
+            max_step: 10.0,
+            time_limit: 60.0,
+            robustness_cap: None,
+            solver: MipSolver::default(),
+        }
     }
 }
 
@@ -105,6 +117,11 @@ impl MipConfig {
         }
         if !(self.max_step > 0.0 && self.max_step.is_finite()) {
             return Err(format!("mip.max_step: {} is not a positive number of metres", self.max_step));
+        }
+        if let Some(c) = self.robustness_cap
+            && !(c > 0.0 && c.is_finite())
+        {
+            return Err(format!("mip.robustness_cap: {c} is not a positive number of metres"));
         }
         if !(self.time_limit > 0.0 && self.time_limit.is_finite()) {
             return Err(format!("mip.time_limit: {} is not a positive number of seconds", self.time_limit));
@@ -191,7 +208,16 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
         // Stage 1: the most robust plan (the discrete choices that matter).
         let most = Built::new(task, &formula, &atoms, &active, start)?;
         let (binaries, constraints) = (most.program.binaries.len(), most.program.constraints.len());
-        let root = most.root.clone();
+        let mut most = most;
+        let root = match cfg.robustness_cap {
+            // max min(ρ̃, cap): a plan at the cap ends the search.
+            Some(cap) => {
+                let c = most.program.vars.add(good_lp::variable().max(cap));
+                most.program.constraints.push(Expression::from(c).leq(most.root.clone()));
+                Expression::from(c)
+            }
+            None => most.root.clone(),
+        };
         let (status, (_, choices, best)) = match most.solve(cfg, left(t0), root, true) {
             Err(e) if timed_out(&e) && last.is_some() => return Ok(out_of_time(last, t0)),
             other => other?,
