@@ -21,7 +21,7 @@
 
 use std::collections::HashMap;
 use std::f64::consts::PI;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use sim::Map;
 use stl::Predicate;
@@ -99,7 +99,7 @@ impl Atoms {
                 .insert(along::along_name(&g.name), Geometry::Disc { center, radius, along_segments: true });
         }
         let (lo, hi) = task.map.region();
-        let cells = free_cells(&boxes, (&lo, &hi));
+        let cells = cached_free_cells(&boxes, (&lo, &hi));
         geometry.insert(
             "safe".into(),
             Geometry::Walls { cells, radius: task.safe_radius, along: task.safe_along },
@@ -202,6 +202,27 @@ fn box_sides(c: &[f64; 2], h: &[f64; 2]) -> impl Iterator<Item = ([f64; 2], f64)
 /// side is at least `δ` from every obstacle (an obstacle point `q` behind side `s` has
 /// `‖p − q‖ ≥ u_s·(p − q) ≥ δ`), and so is every point of a segment whose ends are.
 pub(super) type Cell = Vec<([f64; 2], f64)>;
+
+/// [`free_cells`], computed once per map and region (a few milliseconds, on every plan
+/// otherwise).
+fn cached_free_cells(boxes: &[([f64; 2], [f64; 2])], (lo, hi): (&[f64], &[f64])) -> Vec<Cell> {
+    type Cache = Mutex<Vec<(Vec<u64>, Vec<Cell>)>>;
+    static CACHE: OnceLock<Cache> = OnceLock::new();
+    let key: Vec<u64> = boxes
+        .iter()
+        .flat_map(|(c, h)| [c[0], c[1], h[0], h[1]])
+        .chain(lo.iter().chain(hi).copied())
+        .map(f64::to_bits)
+        .collect();
+    let cache = CACHE.get_or_init(|| Mutex::new(vec![]));
+    let mut cache = cache.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some((_, cells)) = cache.iter().find(|(k, _)| *k == key) {
+        return cells.clone();
+    }
+    let cells = free_cells(boxes, (lo, hi));
+    cache.push((key, cells.clone()));
+    cells
+}
 
 /// The free cells of a map of boxes within the plan region: every set of one or two
 /// box sides that has every box behind one of them and room beyond them, less those
