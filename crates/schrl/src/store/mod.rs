@@ -223,6 +223,15 @@ fn sync_dir(dir: &Path) -> Result<(), StoreError> {
     File::open(dir).and_then(|d| d.sync_all()).map_err(|e| io(dir, e))
 }
 
+/// Writes a single file (not a run) atomically ([`write_atomic`]); refuses to replace an
+/// existing one unless `force`.
+pub(crate) fn save_file(path: &Path, contents: &[u8], force: bool) -> Result<(), StoreError> {
+    if path.exists() && !force {
+        return Err(StoreError::FileExists(path.to_path_buf()));
+    }
+    write_atomic(path, contents)
+}
+
 /// Writes `path` through a temporary sibling, synced, then renamed over it.
 pub(crate) fn write_atomic(path: &Path, contents: &[u8]) -> Result<(), StoreError> {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();

@@ -1,12 +1,12 @@
 //! A single plan as a JSON file (`schrl plan mip --out`): the task it is for, its
 //! waypoints, how it was found and how robust it is; written atomically, never over
-//! an existing file unless asked.
+//! an existing file unless asked. (Read it with any JSON reader; nothing here reads it.)
 
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::{StoreError, invalid, write_atomic};
+use super::StoreError;
 
 /// A plan and where it came from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -33,20 +33,6 @@ pub struct PlanFile {
 
 /// Writes `plan` to `path`; refuses to replace a file unless `force`.
 pub fn save(plan: &PlanFile, path: &Path, force: bool) -> Result<(), StoreError> {
-    if path.exists() && !force {
-        return Err(StoreError::FileExists(path.to_path_buf()));
-    }
-    let json = serde_json::to_string_pretty(plan).map_err(|e| invalid(path, e.to_string()))?;
-    write_atomic(path, json.as_bytes())
-}
-
-/// Reads a plan written by [`save`].
-pub fn load(path: &Path) -> Result<PlanFile, StoreError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| invalid(path, format!("cannot read the plan: {e}")))?;
-    let plan: PlanFile = serde_json::from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
-    if plan.waypoints.is_empty() {
-        return Err(invalid(path, "the plan has no waypoints"));
-    }
-    Ok(plan)
+    let json = serde_json::to_string_pretty(plan).map_err(|e| super::invalid(path, e.to_string()))?;
+    super::save_file(path, json.as_bytes(), force)
 }

@@ -3,16 +3,13 @@
 
 use std::path::Path;
 
-use super::{StoreError, invalid, write_atomic};
+use super::{StoreError, invalid};
 use crate::task::neural_sdf::NeuralSdf;
 
 /// Saves `net` to `path`; refuses to replace a file unless `force`.
 pub fn save(net: &NeuralSdf, path: &Path, force: bool) -> Result<(), StoreError> {
-    if path.exists() && !force {
-        return Err(StoreError::FileExists(path.to_path_buf()));
-    }
     let json = serde_json::to_string(net).map_err(|e| invalid(path, e.to_string()))?;
-    write_atomic(path, json.as_bytes())
+    super::save_file(path, json.as_bytes(), force)
 }
 
 /// Loads a network saved by [`save`], checking its shape.
