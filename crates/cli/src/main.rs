@@ -42,6 +42,9 @@ enum Command {
     /// Goal-conditioned PPO controllers: train, eval.
     #[command(subcommand)]
     Control(commands::control::Command),
+    /// The paper's baselines (TLTL, HTLTL): train, eval.
+    #[command(subcommand)]
+    Baseline(commands::baseline::Command),
     /// Pictures of results: grouped bars (Fig. 4).
     #[command(subcommand)]
     Plot(commands::plot::Command),
@@ -65,6 +68,7 @@ fn main() -> ExitCode {
         Command::Task(cmd) => commands::task::run(cmd),
         Command::Train(args) => commands::train::train(args),
         Command::Eval(args) => commands::train::eval(args),
+        Command::Baseline(cmd) => commands::baseline::run(cmd),
         Command::Plot(cmd) => commands::plot::run(cmd),
     };
     match result {

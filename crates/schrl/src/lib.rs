@@ -12,10 +12,13 @@
 //! * [`control`] — the goal-conditioned PPO controller (paper §3.3).
 //! * [`run`] — executing plans with a controller: the waypoint dispatcher, joint
 //!   training (paper App. A), evaluation over groups of runs.
+//! * [`baseline`] — the paper's baselines: HTLTL (SCHRL without the Lagrange term) and
+//!   TLTL (a flat PPO policy rewarded by the spec's robustness).
 //! * [`store`] — run directories: manifest, atomic checkpoints, lock, metrics log.
 
 #![warn(missing_docs)]
 
+pub mod baseline;
 pub mod control;
 pub mod nn;
 pub mod plan;

@@ -92,7 +92,11 @@ fn tick_labels_stay_short() {
 fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
     use sim::render::{BarChart, BarPanel, ChartPanel, Series, save_bars, save_chart};
     let panel = |y: &str| ChartPanel {
-        series: vec![Series { label: "executed runs".into(), points: vec![(0.0, 0.2), (2e6, 0.9)] }],
+        series: vec![Series {
+            label: "executed runs".into(),
+            points: vec![(0.0, 0.2), (2e6, 0.9)],
+            band: vec![],
+        }],
         y_range: Some((0.0, 1.0)),
         y_label: y.into(),
     };

@@ -224,6 +224,7 @@ fn save_curve(history: &[ControlMetrics], out: &Path) -> Result<()> {
     let series = |label: &str, f: &dyn Fn(&ControlMetrics) -> Option<f64>| Series {
         label: label.into(),
         points: history.iter().filter_map(|m| f(m).map(|y| (m.steps as f64, y))).collect(),
+        band: vec![],
     };
     let panels = [
         ChartPanel {

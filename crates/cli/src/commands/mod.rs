@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod baseline;
 pub mod control;
 pub mod plan;
 pub mod plot;
@@ -13,7 +14,7 @@ pub mod train;
 use schrl::store::{Existing, RunKind, StoreError};
 
 /// Where a training run lives, and what to do when it already exists.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, Default)]
 pub struct RunDirArgs {
     /// Run directory: manifest, checkpoints, metrics.jsonl, pictures.
     #[arg(long)]

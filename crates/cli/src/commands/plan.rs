@@ -336,7 +336,7 @@ pub struct SampleArgs {
     mean: bool,
 }
 
-fn parse_method(s: &str) -> Result<Method, String> {
+pub(crate) fn parse_method(s: &str) -> Result<Method, String> {
     match s {
         "cpg" => Ok(Method::Cpg),
         "pg" => Ok(Method::Pg),

@@ -1,10 +1,10 @@
 //! `schrl plot`: pictures of results written by the experiment scripts.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use sim::render::{BarChart, BarPanel, save_bars};
+use sim::render::{BarChart, BarPanel, ChartPanel, Series, save_bars};
 
 /// Subcommands of `schrl plot`.
 #[derive(clap::Subcommand, Debug)]
@@ -12,6 +12,28 @@ pub enum Command {
     /// Grouped bars of satisfaction and steps to reach per task and variant, each
     /// normalised within its task by the largest variant (the paper's Fig. 4).
     Bars(BarsArgs),
+    /// The spec score of training runs against environment steps, mean ± std over
+    /// seeds: one panel per task, one line per method (the paper's Fig. 3 and Fig. 12).
+    Curves(CurvesArgs),
+}
+
+/// Arguments of `schrl plot curves`.
+#[derive(clap::Args, Debug)]
+pub struct CurvesArgs {
+    /// A run as TASK:METHOD:DIR, DIR a run directory of `schrl train` or `schrl
+    /// baseline train`; repeat once per run (runs of one task and method are its seeds).
+    #[arg(long = "run", required = true, value_name = "TASK:METHOD:DIR")]
+    runs: Vec<String>,
+    /// Points along the x axis: each is the mean score of a run's iterations in a bin
+    /// of environment steps.
+    #[arg(long, default_value_t = 40, value_parser = super::count::<2, 1000>)]
+    bins: usize,
+    /// The picture (PNG or SVG).
+    #[arg(long)]
+    out: PathBuf,
+    /// Replace the picture.
+    #[arg(long)]
+    force: bool,
 }
 
 /// Arguments of `schrl plot bars`.
@@ -34,6 +56,7 @@ pub struct BarsArgs {
 pub fn run(cmd: Command) -> Result<()> {
     match cmd {
         Command::Bars(args) => bars(args),
+        Command::Curves(args) => curves(args),
     }
 }
 
@@ -131,6 +154,136 @@ fn bars(args: BarsArgs) -> Result<()> {
         ],
     };
     save_bars(&chart, &args.out, args.force)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// One run's spec scores: `(environment steps, score)` in order.
+type Curve = Vec<(f64, f64)>;
+
+/// The spec scores of the run in `dir`.
+fn scores(dir: &Path) -> Result<Curve> {
+    let manifest = read_json(&dir.join(schrl::store::MANIFEST))?;
+    // SCHRL and HTLTL spend their first steps on the general controller, which has no
+    // spec score; their joint iterations count from its budget on.
+    let offset = match manifest["kind"].as_str() {
+        Some("joint") => {
+            let general = match manifest["settings"]["controller"].as_str() {
+                Some(c) => PathBuf::from(c),
+                None => dir.join("general"),
+            };
+            let m = read_json(&general.join(schrl::store::MANIFEST))?;
+            m["settings"]["total_steps"].as_f64().with_context(|| {
+                format!("{}: no settings.total_steps", general.join(schrl::store::MANIFEST).display())
+            })?
+        }
+        Some("tltl") => 0.0,
+        other => bail!(
+            "{}: a {} run has no spec score; expected a run of `schrl train` or `schrl baseline train`",
+            dir.display(),
+            other.unwrap_or("unknown")
+        ),
+    };
+    let path = dir.join("metrics.jsonl");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("{}", path.display()))?;
+    let mut out = vec![];
+    for (i, line) in text.lines().enumerate() {
+        let v: serde_json::Value =
+            serde_json::from_str(line).with_context(|| format!("{}: line {}", path.display(), i + 1))?;
+        let steps = v["env_steps"]
+            .as_f64()
+            .with_context(|| format!("{}: line {}: no env_steps", path.display(), i + 1))?;
+        if let Some(score) = v["score"].as_f64() {
+            out.push((offset + steps, score));
+        }
+    }
+    if out.is_empty() {
+        bail!("{}: no spec scores (runs trained before the score was logged have none)", path.display());
+    }
+    Ok(out)
+}
+
+fn read_json(path: &Path) -> Result<serde_json::Value> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{}", path.display()))
+}
+
+/// A run's scores as bin means over `bins` equal bins of `0..=max_x`: a bin with no
+/// iteration keeps the bin before it (a run that stopped early at its target keeps its
+/// last value); bins before the run's first iteration have none.
+fn binned(points: &[(f64, f64)], max_x: f64, bins: usize) -> Vec<Option<f64>> {
+    let mut out = Vec::with_capacity(bins);
+    let mut last = None;
+    let mut rest = points;
+    for k in 1..=bins {
+        let edge = max_x * k as f64 / bins as f64;
+        let n = rest.iter().take_while(|(x, _)| *x <= edge).count();
+        let (inside, after) = rest.split_at(n);
+        if !inside.is_empty() {
+            last = Some(inside.iter().map(|p| p.1).sum::<f64>() / n as f64);
+        }
+        rest = after;
+        out.push(last);
+    }
+    out
+}
+
+fn curves(args: CurvesArgs) -> Result<()> {
+    sim::render::check_target(&args.out, args.force)?;
+    // (task, method) in the order given, each with its runs' points.
+    let mut cells: Vec<((String, String), Vec<Curve>)> = vec![];
+    for spec in &args.runs {
+        let mut parts = spec.splitn(3, ':');
+        let (Some(task), Some(method), Some(dir)) = (parts.next(), parts.next(), parts.next()) else {
+            bail!("--run {spec}: expected TASK:METHOD:DIR");
+        };
+        let points = scores(Path::new(dir))?;
+        let key = (task.to_string(), method.to_string());
+        match cells.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, runs)) => runs.push(points),
+            None => cells.push((key, vec![points])),
+        }
+    }
+    let max_x =
+        cells.iter().flat_map(|(_, r)| r.iter().flat_map(|p| p.last())).map(|p| p.0).fold(0.0, f64::max);
+    let mut tasks: Vec<String> = vec![];
+    for ((task, _), _) in &cells {
+        if !tasks.contains(task) {
+            tasks.push(task.clone());
+        }
+    }
+    let panels: Vec<ChartPanel> = tasks
+        .iter()
+        .map(|task| {
+            let mut series: Vec<Series> = cells
+                .iter()
+                .filter(|((t, _), _)| t == task)
+                .map(|((_, method), runs)| {
+                    let per_run: Vec<Vec<Option<f64>>> =
+                        runs.iter().map(|r| binned(r, max_x, args.bins)).collect();
+                    let (mut points, mut band) = (vec![], vec![]);
+                    for k in 0..args.bins {
+                        let values: Vec<f64> = per_run.iter().filter_map(|r| r[k]).collect();
+                        if values.is_empty() {
+                            continue;
+                        }
+                        let (m, s) = schrl::run::evaluate::mean_std(&values);
+                        let x = max_x * (k + 1) as f64 / args.bins as f64;
+                        points.push((x, m));
+                        band.push((x, m - s, m + s));
+                    }
+                    Series { label: format!("{method} ({} seeds)", runs.len()), points, band }
+                })
+                .collect();
+            series.push(Series {
+                label: "score 0: satisfied above".into(),
+                points: vec![(0.0, 0.0), (max_x, 0.0)],
+                band: vec![],
+            });
+            ChartPanel { series, y_range: None, y_label: format!("{task}: spec score") }
+        })
+        .collect();
+    sim::render::save_chart(&panels, "environment steps", &args.out, args.force)?;
     println!("wrote {}", args.out.display());
     Ok(())
 }

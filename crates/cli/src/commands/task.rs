@@ -30,6 +30,21 @@ pub fn resolve(robot: Option<Robot>, task: &str) -> Result<Task> {
     Ok(t)
 }
 
+/// Whether `--task` (with `--robot`) on a resumed run names a task other than the
+/// saved one (`saved_robot`, its TOML and spec texts); `None`: not given. A built-in
+/// name means the saved robot's task; a file names its own.
+pub fn differs_from_saved(
+    robot: Option<Robot>,
+    task: Option<&str>,
+    saved_robot: Robot,
+    (toml, spec): (&str, &str),
+) -> Result<bool> {
+    let Some(t) = task else { return Ok(false) };
+    let robot = robot.or((!t.ends_with(".toml")).then_some(saved_robot));
+    let task = resolve(robot, t)?;
+    Ok(task.toml != toml || task.spec != spec)
+}
+
 /// Subcommands of `schrl task`.
 #[derive(clap::Subcommand, Debug)]
 pub enum Command {

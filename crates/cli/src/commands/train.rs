@@ -25,7 +25,7 @@ use stl::Semantics;
 /// Arguments of `schrl train`. Flags left out take the default shown; with
 /// `--resume` they take the saved run's value, and a flag given with another value is
 /// refused (`--steps`, `--target`, `--eval-groups` and `--save-every` may change).
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, Default)]
 pub struct TrainArgs {
     /// Robot of a built-in task: point, car, drone, or doggo (needs the `mujoco`
     /// feature) [default: point; a task file names its own].
@@ -58,6 +58,10 @@ pub struct TrainArgs {
     /// Paths planned and executed per iteration [default: 8].
     #[arg(long, value_parser = super::count::<1, 4096>)]
     plan_batch: Option<usize>,
+    /// The planner's objective: cpg (the paper's: the Lagrangian keeps ρ ≥ ε) or pg
+    /// (no Lagrange term: HTLTL, as `schrl baseline train --algo htltl`) [default: cpg].
+    #[arg(long, value_parser = super::plan::parse_method)]
+    method: Option<Method>,
     /// Weight of the planner's policy-gradient term [default: 0.1].
     #[arg(long)]
     pg_weight: Option<f64>,
@@ -114,6 +118,23 @@ pub struct TrainArgs {
 }
 
 impl TrainArgs {
+    /// `schrl train`'s arguments for an HTLTL run (`schrl baseline train --algo
+    /// htltl`): SCHRL's defaults with the planner on the plain policy gradient.
+    pub(crate) fn htltl(base: super::baseline::CommonArgs) -> Self {
+        let super::baseline::CommonArgs { robot, task, seed, steps, run, eval_groups, save_every } = base;
+        Self {
+            robot,
+            task,
+            seed,
+            steps,
+            run,
+            eval_groups,
+            save_every,
+            method: Some(Method::Pg),
+            ..Self::default()
+        }
+    }
+
     /// The settings of a new run: the flags given, defaults for the rest.
     fn settings(&self) -> Result<JointRunSettings> {
         let Some(task_arg) = &self.task else { bail!("--task is required for a new run") };
@@ -139,7 +160,7 @@ impl TrainArgs {
         let cpg = CpgConfig {
             seed,
             semantics: self.semantics.unwrap_or(cpg_defaults.semantics),
-            method: Method::Cpg,
+            method: self.method.unwrap_or(cpg_defaults.method),
             pg_weight: self.pg_weight.unwrap_or(cpg_defaults.pg_weight),
             lambda_lr: self.lambda_lr.unwrap_or(cpg_defaults.lambda_lr),
             planner: self.planner.unwrap_or(cpg_defaults.planner),
@@ -173,15 +194,12 @@ impl TrainArgs {
     /// any other flag given with a different value is refused by name.
     fn resumed(&self, saved: &JointRunSettings) -> Result<JointRunSettings> {
         use super::differs;
-        let task_differs = match &self.task {
-            None => false,
-            Some(t) => {
-                // A built-in name means the saved robot's task; a file names its own.
-                let robot = self.robot.or((!t.ends_with(".toml")).then_some(saved.robot));
-                let task = super::task::resolve(robot, t)?;
-                task.toml != saved.task_toml || task.spec != saved.task_spec
-            }
-        };
+        let task_differs = super::task::differs_from_saved(
+            self.robot,
+            self.task.as_deref(),
+            saved.robot,
+            (&saved.task_toml, &saved.task_spec),
+        )?;
         super::refuse_conflicts(
             RunKind::Joint,
             &[
@@ -192,6 +210,7 @@ impl TrainArgs {
                 ("--semantics", differs(&self.semantics, &saved.cpg.semantics)),
                 ("--planner", differs(&self.planner, &saved.cpg.planner)),
                 ("--plan-batch", differs(&self.plan_batch, &saved.joint.plan_batch)),
+                ("--method", differs(&self.method, &saved.cpg.method)),
                 ("--pg-weight", differs(&self.pg_weight, &saved.cpg.pg_weight)),
                 ("--lambda-lr", differs(&self.lambda_lr, &saved.cpg.lambda_lr)),
                 ("--pretrain-updates", differs(&self.pretrain_updates, &saved.pretrain.updates)),
@@ -498,6 +517,7 @@ fn save_curve(history: &[JointMetrics], out: &Path) -> Result<()> {
                 (history[i].env_steps as f64, w.iter().map(f).sum::<f64>() / w.len() as f64)
             })
             .collect(),
+        band: vec![],
     };
     let panels = [
         ChartPanel {
@@ -523,7 +543,7 @@ fn save_curve(history: &[JointMetrics], out: &Path) -> Result<()> {
     Ok(())
 }
 
-fn print_eval(e: &TaskEval) {
+pub(crate) fn print_eval(e: &TaskEval) {
     let (sm, ss) = mean_std(&e.satisfaction);
     println!("satisfaction: {sm:.3} ± {ss:.3}");
     if e.steps_to_reach.is_empty() {
@@ -538,12 +558,15 @@ fn print_eval(e: &TaskEval) {
     );
 }
 
-fn draw(task: &Task, e: &TaskEval, out: &Path, force: bool) -> Result<()> {
+pub(crate) fn draw(task: &Task, e: &TaskEval, out: &Path, force: bool) -> Result<()> {
     let mut scene = Scene::new(task.map.clone());
     scene.goals = task.picture_goals();
     let radius = sim::make_env(task.robot, task.map.clone())?.radius();
     for run in e.examples.iter().take(4) {
-        scene.paths.push(Polyline { points: run.planned.clone(), kind: PathKind::Planned });
+        // A flat policy (TLTL) plans nothing.
+        if !run.planned.is_empty() {
+            scene.paths.push(Polyline { points: run.planned.clone(), kind: PathKind::Planned });
+        }
         scene.paths.push(Polyline { points: run.trajectory.clone(), kind: PathKind::Executed });
     }
     // The first run's pose at eight moments: a Car drives forwards or backwards and

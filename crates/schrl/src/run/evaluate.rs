@@ -56,6 +56,62 @@ pub struct TaskEval {
     pub examples: Vec<Execution>,
 }
 
+/// One evaluation group's count so far ([`TaskEval::tally`]).
+#[derive(Default)]
+pub(crate) struct GroupTally {
+    satisfied: usize,
+    steps: f64,
+    runs: usize,
+}
+
+impl TaskEval {
+    /// No groups yet.
+    pub(crate) fn empty() -> Self {
+        Self {
+            satisfaction: vec![],
+            steps_to_reach: vec![],
+            collisions: 0,
+            falls: 0,
+            timeouts: 0,
+            entered: 0,
+            examples: vec![],
+        }
+    }
+
+    /// Counts one judged run of the current group: its failure if it failed, its
+    /// steps to reach (`reach`) if it satisfied, and keeps it as an example while
+    /// there are few.
+    pub(crate) fn tally(
+        &mut self,
+        group: &mut GroupTally,
+        run: Execution,
+        reach: impl FnOnce(&Execution) -> f64,
+    ) {
+        match run.outcome {
+            Outcome::Collided => self.collisions += 1,
+            Outcome::Fell => self.falls += 1,
+            Outcome::TimedOut => self.timeouts += 1,
+            Outcome::Completed => self.entered += usize::from(run.entered.is_some()),
+        }
+        group.runs += 1;
+        if run.satisfied() {
+            group.satisfied += 1;
+            group.steps += reach(&run);
+        }
+        if self.examples.len() < 6 {
+            self.examples.push(run);
+        }
+    }
+
+    /// Closes a group: its satisfaction, and its mean steps to reach if any run satisfied.
+    pub(crate) fn end_group(&mut self, group: GroupTally) {
+        self.satisfaction.push(group.satisfied as f64 / group.runs.max(1) as f64);
+        if group.satisfied > 0 {
+            self.steps_to_reach.push(group.steps / group.satisfied as f64);
+        }
+    }
+}
+
 /// Mean and sample standard deviation.
 pub fn mean_std(xs: &[f64]) -> (f64, f64) {
     let n = xs.len() as f64;
@@ -165,15 +221,7 @@ pub fn evaluate_task_with(
 ) -> Result<TaskEval, RunError> {
     let spec = task.execution_spec();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut eval = TaskEval {
-        satisfaction: vec![],
-        steps_to_reach: vec![],
-        collisions: 0,
-        falls: 0,
-        timeouts: 0,
-        entered: 0,
-        examples: vec![],
-    };
+    let mut eval = TaskEval::empty();
     for group in 0..groups {
         let g0 = task.sample_starts(&mut rng, per_group)?;
         let noise = task.sample_noise(&mut rng, per_group)?;
@@ -188,29 +236,14 @@ pub fn evaluate_task_with(
             dispatchers.push(start_run(env.as_mut(), rng.random(), path, task.step_limit, obs)?);
         }
         let episodes = drive(&mut envs, dispatchers, &mut raw, &mut MeanActions::new(controller))?;
-        let (mut sat, mut steps) = (0usize, 0.0f64);
+        let mut tally = GroupTally::default();
         for (index, (e, path)) in episodes.into_iter().zip(&paths).enumerate() {
             let run =
                 e.dispatcher.into_execution(&spec, path.clone(), e.trajectory, e.headings, e.control_return);
-            match run.outcome {
-                Outcome::Collided => eval.collisions += 1,
-                Outcome::Fell => eval.falls += 1,
-                Outcome::TimedOut => eval.timeouts += 1,
-                Outcome::Completed => eval.entered += usize::from(run.entered.is_some()),
-            }
             on_run(group, index, &run)?;
-            if run.satisfied() {
-                sat += 1;
-                steps += reach_steps(&run, task);
-            }
-            if eval.examples.len() < 6 {
-                eval.examples.push(run);
-            }
+            eval.tally(&mut tally, run, |r| reach_steps(r, task));
         }
-        eval.satisfaction.push(sat as f64 / per_group as f64);
-        if sat > 0 {
-            eval.steps_to_reach.push(steps / sat as f64);
-        }
+        eval.end_group(tally);
     }
     Ok(eval)
 }

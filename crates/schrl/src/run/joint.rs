@@ -36,6 +36,7 @@ use crate::run::episode::{Driver, drive};
 use crate::run::evaluate::reach_steps;
 use crate::run::execute::{Execution, Outcome, start_run, task_env};
 use crate::task::Task;
+use crate::task::along::ExecutionSpec;
 
 /// Joint-training settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -161,6 +162,11 @@ pub struct JointMetrics {
     /// Mean low-level reward `r_l` of the runs ([`execution_reward`]).
     #[serde(default)]
     pub low_level_reward: f64,
+    /// Mean spec score of the runs ([`crate::task::along::ExecutionSpec::score`]: the
+    /// robustness of what the robot did, finite for failed runs too; Fig. 3's y-axis).
+    /// `None` in metrics written before it existed.
+    #[serde(default)]
+    pub score: Option<f64>,
     /// PPO statistics (when the controller updated in this iteration).
     pub control: Option<PpoStats>,
     /// Environment steps per second in this iteration.
@@ -344,7 +350,9 @@ impl JointTrainer {
         let paths = paths_of(&batch.paths)?;
         let hard = self.plan.hard_robustness(&batch.paths)?;
         let learn = !self.config.freeze_controller;
-        let runs = self.execute(&paths, learn)?;
+        // Judged on the task's own goals, not the planner's shrunk ones.
+        let spec = self.task.execution_spec();
+        let runs = self.execute(&spec, &paths, learn)?;
         let steps: usize = runs.iter().map(|r| r.steps).sum();
         self.env_steps += steps;
         let rl: Vec<f64> = runs.iter().map(|r| execution_reward(r, &self.task)).collect();
@@ -382,6 +390,9 @@ impl JointTrainer {
             lambda: self.plan.lagrangian().lambda,
             plan_loss,
             low_level_reward: rl.iter().sum::<f64>() / n,
+            score: Some(
+                runs.iter().map(|r| spec.score(&r.executed, &r.trajectory, &r.reached_at)).sum::<f64>() / n,
+            ),
             control,
             steps_per_sec: steps as f64 / start.elapsed().as_secs_f64().max(1e-9),
         })
@@ -389,9 +400,12 @@ impl JointTrainer {
 
     /// Executes `paths` in lockstep, one environment each; with `learn`, samples
     /// actions and records the transitions for PPO, otherwise uses mean actions.
-    fn execute(&mut self, paths: &[Vec<Vec<f64>>], learn: bool) -> Result<Vec<Execution>, RunError> {
-        // Judged on the task's own goals, not the planner's shrunk ones.
-        let spec = self.task.execution_spec();
+    fn execute(
+        &mut self,
+        spec: &ExecutionSpec,
+        paths: &[Vec<Vec<f64>>],
+        learn: bool,
+    ) -> Result<Vec<Execution>, RunError> {
         let od = self.control.policy.obs_dim();
         let n = paths.len();
         let mut raw = vec![0.0; n * od];
@@ -437,7 +451,7 @@ impl JointTrainer {
                 self.buffer.ends.extend((0..len).map(|k| k + 1 == len));
             }
             out.push(run.dispatcher.into_execution(
-                &spec,
+                spec,
                 paths[i].clone(),
                 run.trajectory,
                 run.headings,

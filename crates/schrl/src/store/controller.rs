@@ -16,7 +16,7 @@ use sim::{Map, VecEnv};
 use super::{Checkpoint, RunKind, SaveFiles, StoreError, invalid};
 use crate::control::normalize::{RewardScaler, RunningMeanStd};
 use crate::control::policy::ActorCritic;
-use crate::control::ppo::PpoLearner;
+use crate::control::ppo::{PpoConfig, PpoLearner};
 use crate::control::trainer::{ControlConfig, ControlTrainer, Controller, RecentOutcomes};
 use crate::nn::adam::Adam;
 
@@ -44,13 +44,7 @@ struct State {
 
 /// Writes `t`'s two files into a save.
 pub fn save_into(files: &mut SaveFiles, t: &ControlTrainer) -> Result<(), StoreError> {
-    let vec = |v: &[f32]| Tensor::from_slice(v, v.len(), &Device::Cpu);
-    let tensors =
-        [("params", &t.policy.params), ("adam.m", &t.learner.adam.m), ("adam.v", &t.learner.adam.v)]
-            .into_iter()
-            .map(|(k, v)| vec(v).map(|v| (k.to_string(), v)))
-            .collect::<Result<HashMap<String, Tensor>, _>>();
-    files.write_with(WEIGHTS, |p| tensors.and_then(|t| candle_core::safetensors::save(&t, p)))?;
+    save_weights(files, &t.policy, &t.learner)?;
     let state = State {
         config: t.config.clone(),
         obs_dim: t.policy.obs_dim(),
@@ -79,45 +73,8 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<ControlTrainer, StoreError> {
     let map =
         Map::by_name(&state.config.map).ok_or_else(|| bad(format!("unknown map '{}'", state.config.map)))?;
 
-    let weights = ckpt.file(WEIGHTS)?;
-    let tensors = candle_core::safetensors::load(&weights, &Device::Cpu)
-        .map_err(|e| invalid(&weights, e.to_string()))?;
-    let get = |name: &str| -> Result<Vec<f32>, StoreError> {
-        let t = tensors.get(name).ok_or_else(|| invalid(&weights, format!("no tensor '{name}'")))?;
-        let v = t
-            .flatten_all()
-            .and_then(|t| t.to_vec1::<f32>())
-            .map_err(|e| invalid(&weights, format!("{name}: {e}")))?;
-        match v.iter().find(|x| !x.is_finite()) {
-            Some(x) => {
-                Err(invalid(&weights, format!("tensor '{name}' holds {x}: the weights are not usable")))
-            }
-            None => Ok(v),
-        }
-    };
-    let mut policy =
-        ActorCritic::new(state.obs_dim, state.act_dim, &state.config.ppo.hidden, &mut rand::rng());
-    let params = get("params")?;
-    if params.len() != policy.params.len() {
-        return Err(invalid(
-            &weights,
-            format!(
-                "{} parameters, but a {}-{:?}-{} actor-critic has {}",
-                params.len(),
-                state.obs_dim,
-                state.config.ppo.hidden,
-                state.act_dim,
-                policy.params.len()
-            ),
-        ));
-    }
-    policy.params = params;
-    let mut learner = PpoLearner::new(state.config.ppo.clone(), &policy);
-    let (m, v) = (get("adam.m")?, get("adam.v")?);
-    if m.len() != policy.params.len() || v.len() != policy.params.len() {
-        return Err(invalid(&weights, "optimizer moments have the wrong length"));
-    }
-    learner.adam = Adam { m, v, t: state.adam_t, ..Adam::new(0) };
+    let (policy, learner) =
+        load_weights(ckpt, (state.obs_dim, state.act_dim), &state.config.ppo, state.adam_t)?;
 
     let n = state.config.ppo.num_envs;
     let env_err = |e: sim::EnvError| bad(e.to_string());
@@ -149,6 +106,70 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<ControlTrainer, StoreError> {
         state.updates,
     )
     .map_err(|e| bad(e.to_string()))
+}
+
+/// Writes an actor-critic's parameters and its Adam moments as `controller.safetensors`
+/// (the controller's file; a TLTL run's flat policy is saved the same way).
+pub(super) fn save_weights(
+    files: &mut SaveFiles,
+    policy: &ActorCritic,
+    learner: &PpoLearner,
+) -> Result<(), StoreError> {
+    let vec = |v: &[f32]| Tensor::from_slice(v, v.len(), &Device::Cpu);
+    let tensors = [("params", &policy.params), ("adam.m", &learner.adam.m), ("adam.v", &learner.adam.v)]
+        .into_iter()
+        .map(|(k, v)| vec(v).map(|v| (k.to_string(), v)))
+        .collect::<Result<HashMap<String, Tensor>, _>>();
+    files.write_with(WEIGHTS, |p| tensors.and_then(|t| candle_core::safetensors::save(&t, p)))
+}
+
+/// Reads what [`save_weights`] wrote for an `(obs_dim, act_dim)` actor-critic trained
+/// with `ppo`, Adam at step `adam_t`; refuses weights of another shape or not finite.
+pub(super) fn load_weights(
+    ckpt: &Checkpoint,
+    (obs_dim, act_dim): (usize, usize),
+    ppo: &PpoConfig,
+    adam_t: u64,
+) -> Result<(ActorCritic, PpoLearner), StoreError> {
+    let weights = ckpt.file(WEIGHTS)?;
+    let tensors = candle_core::safetensors::load(&weights, &Device::Cpu)
+        .map_err(|e| invalid(&weights, e.to_string()))?;
+    let get = |name: &str| -> Result<Vec<f32>, StoreError> {
+        let t = tensors.get(name).ok_or_else(|| invalid(&weights, format!("no tensor '{name}'")))?;
+        let v = t
+            .flatten_all()
+            .and_then(|t| t.to_vec1::<f32>())
+            .map_err(|e| invalid(&weights, format!("{name}: {e}")))?;
+        match v.iter().find(|x| !x.is_finite()) {
+            Some(x) => {
+                Err(invalid(&weights, format!("tensor '{name}' holds {x}: the weights are not usable")))
+            }
+            None => Ok(v),
+        }
+    };
+    let mut policy = ActorCritic::new(obs_dim, act_dim, &ppo.hidden, &mut rand::rng());
+    let params = get("params")?;
+    if params.len() != policy.params.len() {
+        return Err(invalid(
+            &weights,
+            format!(
+                "{} parameters, but a {}-{:?}-{} actor-critic has {}",
+                params.len(),
+                obs_dim,
+                ppo.hidden,
+                act_dim,
+                policy.params.len()
+            ),
+        ));
+    }
+    policy.params = params;
+    let mut learner = PpoLearner::new(ppo.clone(), &policy);
+    let (m, v) = (get("adam.m")?, get("adam.v")?);
+    if m.len() != policy.params.len() || v.len() != policy.params.len() {
+        return Err(invalid(&weights, "optimizer moments have the wrong length"));
+    }
+    learner.adam = Adam { m, v, t: adam_t, ..Adam::new(0) };
+    Ok((policy, learner))
 }
 
 /// Loads the controller training run in `dir` (a `schrl control train` run), ready to

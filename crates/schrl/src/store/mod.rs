@@ -37,6 +37,7 @@ mod metrics;
 pub mod plan_file;
 pub mod planner;
 pub mod sdf;
+pub mod tltl;
 
 use std::collections::BTreeMap;
 use std::fs::{self, File};
@@ -67,6 +68,8 @@ pub enum RunKind {
     Planner,
     /// `schrl train`: planner and controller trained together on a task.
     Joint,
+    /// `schrl baseline train --algo tltl`: a flat policy trained on a task's robustness.
+    Tltl,
 }
 
 impl RunKind {
@@ -76,6 +79,7 @@ impl RunKind {
             RunKind::Controller => "controller",
             RunKind::Planner => "planner",
             RunKind::Joint => "joint",
+            RunKind::Tltl => "tltl",
         }
     }
 
@@ -85,6 +89,7 @@ impl RunKind {
             RunKind::Controller => "schrl control train",
             RunKind::Planner => "schrl plan train",
             RunKind::Joint => "schrl train",
+            RunKind::Tltl => "schrl baseline train --algo tltl",
         }
     }
 }

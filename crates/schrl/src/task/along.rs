@@ -270,6 +270,25 @@ impl ExecutionSpec {
         &self.regions
     }
 
+    /// The spec score of a run, finite whether or not it finished (the y-axis of the
+    /// paper's Fig. 3 and Fig. 12): the hard robustness of [`ExecutionSpec::judge`] on
+    /// the run with its unreached waypoints filled by where the robot ended (the last
+    /// trajectory position, at the last step), as if it stayed there. Equal to the
+    /// judged robustness for a run that reached every waypoint; a collided run ends at
+    /// the obstacle, where `safe` is negative. `trajectory` must not be empty.
+    pub fn score(&self, executed: &[Vec<f64>], trajectory: &[Vec<f64>], reached_at: &[usize]) -> f64 {
+        let (Some(last), Some(first)) = (trajectory.last(), executed.first()) else {
+            return f64::NEG_INFINITY;
+        };
+        let end = trajectory.len() - 1;
+        let mut at: Vec<usize> = reached_at.iter().map(|s| (*s).min(end)).take(self.steps).collect();
+        at.resize(self.steps, end);
+        let mut path: Vec<Vec<f64>> =
+            std::iter::once(first.clone()).chain(executed.iter().skip(1).take(self.steps).cloned()).collect();
+        path.resize(self.steps + 1, last.clone());
+        self.judge(&path, trajectory, &at).robustness
+    }
+
     /// Judges a run: `executed` (the start and the positions where waypoints were
     /// reached), `trajectory` (every position, the start first; empty: only the
     /// executed positions are known) and `reached_at` (the environment step at which

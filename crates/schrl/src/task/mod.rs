@@ -535,11 +535,15 @@ impl Task {
     /// low equals its high (a fixed start, which task files allow) is that number, and
     /// draws nothing from `rng`.
     pub fn sample_starts(&self, rng: &mut ChaCha8Rng, n: usize) -> candle_core::Result<Tensor> {
+        let v: Vec<f32> = (0..n).flat_map(|_| self.sample_start(rng)).map(|x| x as f32).collect();
+        Tensor::from_vec(v, (n, self.start.0.len()), &Device::Cpu)
+    }
+
+    /// One start drawn uniformly from the start region (as one row of
+    /// [`Task::sample_starts`]).
+    pub fn sample_start(&self, rng: &mut ChaCha8Rng) -> Vec<f64> {
         let (lo, hi) = &self.start;
-        let dim = lo.len();
-        let mut draw = |l: f64, h: f64| if l < h { rng.random_range(l..h) } else { l };
-        let v: Vec<f32> = (0..n * dim).map(|i| draw(lo[i % dim], hi[i % dim]) as f32).collect();
-        Tensor::from_vec(v, (n, dim), &Device::Cpu)
+        lo.iter().zip(hi).map(|(&l, &h)| if l < h { rng.random_range(l..h) } else { l }).collect()
     }
 
     /// Standard-normal planner noise for `n` paths: `[n, steps, dim]`.

@@ -22,6 +22,9 @@ pub struct Series {
     pub label: String,
     /// Its `(x, y)` points; non-finite ones are skipped.
     pub points: Vec<(f64, f64)>,
+    /// A band drawn under the line in its colour, light: `(x, low, high)` (e.g. mean ±
+    /// std over seeds); empty: none. Non-finite entries are skipped.
+    pub band: Vec<(f64, f64, f64)>,
 }
 
 /// One panel of a line chart.
@@ -92,8 +95,11 @@ where
         let (top, plot) = area.split_vertically(LEGEND_HEIGHT);
         draw_legend(&top, &legend(panel.series.iter().map(|s| s.label.clone()), Mark::Line))?;
         let pts = || panel.series.iter().flat_map(|s| s.points.iter());
+        let band = || panel.series.iter().flat_map(|s| s.band.iter());
         let (x0, x1) = extent(pts().map(|p| p.0));
-        let (y0, y1) = panel.y_range.unwrap_or_else(|| extent(pts().map(|p| p.1)));
+        let (y0, y1) = panel
+            .y_range
+            .unwrap_or_else(|| extent(pts().map(|p| p.1).chain(band().flat_map(|b| [b.1, b.2]))));
         let pad = 0.05 * (y1 - y0);
         let mut chart = ChartBuilder::on(&plot)
             .margin_left(12)
@@ -104,6 +110,20 @@ where
             .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
             .map_err(err)?;
         axes(&mut chart, x_label, &panel.y_label).draw().map_err(err)?;
+        for (i, s) in panel.series.iter().enumerate() {
+            let band: Vec<(f64, f64, f64)> = s
+                .band
+                .iter()
+                .copied()
+                .filter(|b| b.0.is_finite() && b.1.is_finite() && b.2.is_finite())
+                .collect();
+            if band.len() > 1 {
+                let outline: Vec<(f64, f64)> =
+                    band.iter().map(|b| (b.0, b.2)).chain(band.iter().rev().map(|b| (b.0, b.1))).collect();
+                let fill = PALETTE[i % PALETTE.len()].mix(0.2).filled();
+                chart.draw_series(std::iter::once(Polygon::new(outline, fill))).map_err(err)?;
+            }
+        }
         for (i, s) in panel.series.iter().enumerate() {
             let line: Vec<(f64, f64)> =
                 s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite()).collect();

@@ -1,0 +1,91 @@
+//! `schrl baseline train|eval` and `schrl plot curves` end to end on a small task file.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn schrl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_schrl")).env("RAYON_NUM_THREADS", "1").args(args).output().expect("runs")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// A fresh directory with the easy task's two files.
+fn workspace(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("schrl-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("easy.toml"),
+        "name = \"easy\"\nrobot = \"point\"\nmap = \"empty\"\nspec = \"easy.stl\"\nsteps = 2\n\
+         step_limit = 100\nsafe_radius = 0.1\n[start]\nlow = [-0.2, -0.2]\nhigh = [0.2, 0.2]\n\
+         [[goal]]\nname = \"g\"\ncenter = [1.0, 0.0]\nradius = 0.6\n",
+    )
+    .unwrap();
+    std::fs::write(dir.join("easy.stl"), "F[1,2] g & G[1,2] safe\n").unwrap();
+    dir
+}
+
+fn updates(run: &Path) -> Vec<u64> {
+    std::fs::read_to_string(run.join("metrics.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["update"].as_u64().unwrap())
+        .collect()
+}
+
+#[test]
+fn tltl_trains_resumes_refuses_to_clobber_evaluates_and_plots() {
+    let dir = workspace("baseline-cli");
+    let task = dir.join("easy.toml");
+    let run = dir.join("run");
+    let (task, out) = (task.to_str().unwrap(), run.to_str().unwrap());
+    let train = |extra: &[&str]| {
+        let mut a = vec!["baseline", "train", "--algo", "tltl", "--out", out];
+        a.extend_from_slice(extra);
+        schrl(&a)
+    };
+    let o = train(&["--task", task, "--steps", "8000", "--eval-groups", "1"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains("satisfaction: "), "{}", text(&o.stdout));
+    for f in ["manifest.json", "metrics.jsonl", "training_curve.png", "episodes.png"] {
+        assert!(run.join(f).exists(), "{f} missing");
+    }
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["kind"], "tltl");
+    assert_eq!(updates(&run), [1, 2]);
+
+    let o = train(&["--task", task, "--steps", "4000"]);
+    assert!(!o.status.success() && text(&o.stderr).contains("--force"), "{}", text(&o.stderr));
+    let o = train(&["--resume", "--seed", "9"]);
+    assert!(!o.status.success() && text(&o.stderr).contains("--seed"), "{}", text(&o.stderr));
+
+    // Resumed to a larger budget, the log continues where it stopped.
+    let o = train(&["--resume", "--steps", "12000", "--eval-groups", "0"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(updates(&run), [1, 2, 3]);
+
+    let o = schrl(&["baseline", "eval", "--ckpt", out, "--groups", "2", "--per-group", "10"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains("satisfaction: ") && text(&o.stdout).contains("collisions"));
+
+    let png = dir.join("curves.png");
+    let spec = format!("easy:tltl:{out}");
+    let o = schrl(&["plot", "curves", "--run", &spec, "--run", &spec, "--out", png.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(std::fs::metadata(&png).unwrap().len() > 1000);
+    let o = schrl(&["plot", "curves", "--run", out, "--out", png.to_str().unwrap(), "--force"]);
+    assert!(!o.status.success() && text(&o.stderr).contains("TASK:METHOD:DIR"), "{}", text(&o.stderr));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn baseline_eval_names_a_directory_that_is_not_a_run() {
+    let dir = workspace("baseline-eval-missing");
+    let o = schrl(&["baseline", "eval", "--ckpt", dir.join("nothing").to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(text(&o.stderr).contains("nothing"), "{}", text(&o.stderr));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

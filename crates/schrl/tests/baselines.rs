@@ -1,0 +1,142 @@
+//! The paper's baselines: TLTL learns an easy spec from its robustness alone and
+//! resumes exactly; HTLTL is joint training with the Lagrange term gone; the spec
+//! score every curve plots.
+
+use std::path::Path;
+
+use schrl::baseline::htltl;
+use schrl::baseline::tltl::{TltlSettings, TltlTrainer, evaluate};
+use schrl::control::{ControlConfig, ControlTrainer, PpoConfig};
+use schrl::plan::cpg::{CpgConfig, Method};
+use schrl::run::joint::{JointConfig, JointTrainer};
+use schrl::store::{self, Existing, RunKind, RunWriter};
+use schrl::task::{Task, TaskKind};
+use sim::Robot;
+
+/// Point in the open, one goal a metre ahead: reachable in well under the 100 steps.
+const EASY: &str = r#"
+name = "easy"
+robot = "point"
+map = "empty"
+spec = "easy.stl"
+steps = 2
+step_limit = 100
+safe_radius = 0.1
+
+[start]
+low = [-0.2, -0.2]
+high = [0.2, 0.2]
+
+[[goal]]
+name = "g"
+center = [1.0, 0.0]
+radius = 0.6
+"#;
+
+fn easy_settings(seed: u64) -> TltlSettings {
+    TltlSettings {
+        robot: Robot::Point,
+        task_toml: EASY.into(),
+        task_spec: "F[1,2] g & G[1,2] safe".into(),
+        seed,
+        steps: 40_000,
+        ppo: PpoConfig { rollout: 1000, ..PpoConfig::reference() },
+        eval_groups: 0,
+        save_every: 1,
+    }
+}
+
+#[test]
+fn tltl_raises_the_spec_score_and_satisfies_an_easy_spec_well_above_chance() {
+    let mut t = TltlTrainer::new(easy_settings(1)).unwrap();
+    let mut scores = vec![];
+    while !t.finished() {
+        let m = t.train_update().unwrap();
+        scores.extend(m.score);
+    }
+    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+    let (early, late) = (mean(&scores[..5]), mean(&scores[scores.len() - 5..]));
+    assert!(late > early + 0.1, "spec score did not rise: {early:.3} → {late:.3}");
+    let e = evaluate(&t.task, &t.controller(), (1, 50), 7).unwrap();
+    // An untrained policy satisfies it in about 2 % of episodes.
+    assert!(e.satisfaction[0] >= 0.3, "satisfaction {:?}", e.satisfaction);
+    assert_eq!(e.collisions, 0);
+    // The mean over satisfying episodes of the sampled step (50 or 100) from which the
+    // spec held.
+    let steps = e.steps_to_reach[0];
+    assert!((50.0..=100.0).contains(&steps), "{steps}");
+}
+
+#[test]
+fn a_resumed_tltl_run_continues_exactly_as_one_that_never_stopped() {
+    let mut straight = TltlTrainer::new(easy_settings(2)).unwrap();
+    let dir = std::env::temp_dir().join(format!("schrl-tltl-resume-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let settings = easy_settings(2);
+    let mut run = RunWriter::create(&dir, RunKind::Tltl, &settings, Existing::Refuse).unwrap();
+    let mut stopped = TltlTrainer::new(settings).unwrap();
+    for _ in 0..2 {
+        straight.train_update().unwrap();
+        stopped.train_update().unwrap();
+    }
+    run.save(|f| store::tltl::save_into(f, &stopped)).unwrap();
+    drop((run, stopped));
+    let mut resumed = store::tltl::load(&dir).unwrap();
+    let a = straight.train_update().unwrap();
+    let b = resumed.train_update().unwrap();
+    assert_eq!(a.score, b.score);
+    assert_eq!(straight.policy.params, resumed.policy.params);
+    assert_eq!(straight.raw_obs, resumed.raw_obs);
+    assert_eq!(straight.trajectories, resumed.trajectories);
+    // Another kind's reader refuses it, naming both kinds.
+    let err = store::joint::load(&dir).err().expect("a TLTL run is not a joint run").to_string();
+    assert!(err.contains("tltl") && err.contains("joint"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn tltl_refuses_a_task_for_another_robot() {
+    let s = TltlSettings { robot: Robot::Car, ..easy_settings(0) };
+    let err = TltlTrainer::new(s).err().expect("refused").to_string();
+    assert!(err.contains("robot") && err.contains("car"), "{err}");
+}
+
+#[test]
+fn htltl_is_joint_training_without_the_lagrange_term() {
+    let cpg = htltl(CpgConfig { seed: 5, ..CpgConfig::default() });
+    assert_eq!(cpg.method, Method::Pg);
+    let mut cc = ControlConfig::for_robot(Robot::Point);
+    cc.ppo = PpoConfig { rollout: 1000, minibatch: 100, epochs: 2, ..PpoConfig::reference() };
+    let control = ControlTrainer::new(cc).unwrap();
+    let mut t =
+        JointTrainer::new(Task::point(TaskKind::Branch), JointConfig::default(), cpg, control).unwrap();
+    let before = t.plan.varmap().all_vars()[0].as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    for _ in 0..5 {
+        let m = t.iterate().unwrap();
+        // λ neither enters the loss nor moves, even while the plans violate the spec.
+        assert_eq!(m.lambda, cpg.lambda_init);
+        assert!(m.plan_loss.is_some());
+        assert!(m.score.is_some_and(f64::is_finite), "{:?}", m.score);
+    }
+    let after = t.plan.varmap().all_vars()[0].as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    assert_ne!(before, after, "the planner never trained");
+}
+
+#[test]
+fn the_spec_score_is_the_robustness_of_a_finished_run_and_finite_for_an_unfinished_one() {
+    let task =
+        Task::from_texts(Path::new("easy.toml"), EASY, Path::new("easy.stl"), "F[1,2] g & G[1,2] safe")
+            .unwrap();
+    let spec = task.execution_spec();
+    let trajectory: Vec<Vec<f64>> = (0..=100).map(|k| vec![k as f64 / 100.0, 0.0]).collect();
+    let executed = vec![trajectory[0].clone(), trajectory[50].clone(), trajectory[100].clone()];
+    let judged = spec.judge(&executed, &trajectory, &[50, 100]).robustness;
+    assert_eq!(spec.score(&executed, &trajectory, &[50, 100]), judged);
+    assert!((judged - 0.6).abs() < 1e-9, "{judged}");
+    // Stopped at step 30 (say, by a collision) before reaching a waypoint: judged −∞,
+    // scored as staying at x = 0.3, 0.1 m outside the goal.
+    let short = &trajectory[..=30];
+    assert_eq!(spec.judge(&executed[..2], short, &[30]).robustness, f64::NEG_INFINITY);
+    let s = spec.score(&[trajectory[0].clone()], short, &[]);
+    assert!((s - (0.6 - 0.7)).abs() < 1e-9, "{s}");
+}

@@ -1,0 +1,67 @@
+#!/usr/bin/env bash
+# The paper's Fig. 3 / Fig. 12 on Point: SCHRL (`schrl train`), HTLTL and TLTL
+# (`schrl baseline train`) on every task and seed, each with its defaults (the same
+# 4 M environment-step budget: SCHRL's and HTLTL's 1 M general-controller steps count).
+# Each run goes to OUT/<method>/point-<task>-<seed>; its printed evaluation to
+# result.txt there. A run without result.txt is resumed from its last checkpoint, so
+# the script can be stopped and rerun. Then writes OUT/baselines.csv (one row per run:
+# the 5 × 100 evaluation) and OUT/fig3-point.png / .svg (`schrl plot curves`: spec
+# score against environment steps, mean ± std over seeds).
+# Usage: [TASKS="seq cover"] [METHODS="schrl htltl tltl"] [JOBS=2] [SCHRL_BIN=path] \
+#        scripts/baselines.sh OUT [SEEDS...]
+set -euo pipefail
+out=$1
+shift
+seeds=("${@:-0 1 2 3 4}")
+read -r -a seeds <<<"${seeds[*]}"
+read -r -a tasks <<<"${TASKS:-seq cover branch loop signal}"
+read -r -a methods <<<"${METHODS:-schrl htltl tltl}"
+export RAYON_NUM_THREADS=1
+source "$(dirname "${BASH_SOURCE[0]}")/summary.sh"
+schrl_bin
+export bin
+
+one() { # method task seed
+  local dir="$out/$1/point-$2-$3" cmd again=()
+  [[ -f "$dir/result.txt" ]] && return 0
+  case $1 in
+    schrl) cmd=(train) ;;
+    *) cmd=(baseline train --algo "$1") ;;
+  esac
+  if [[ -f "$dir/manifest.json" ]]; then again=(--resume); else again=(--task "$2" --seed "$3"); fi
+  mkdir -p "$(dirname "$dir")"
+  "$bin" "${cmd[@]}" "${again[@]}" --out "$dir" >"$dir.out" 2>"$dir.err"
+  mv "$dir.out" "$dir/result.txt"
+  echo "$1 $2 seed $3: $(grep '^satisfaction:' "$dir/result.txt")"
+}
+export -f one
+export out
+for task in "${tasks[@]}"; do
+  for seed in "${seeds[@]}"; do
+    for method in "${methods[@]}"; do echo "$method $task $seed"; done
+  done
+done | xargs -P "${JOBS:-2}" -L 1 bash -c 'one "$@"' _
+
+csv="$out/baselines.csv"
+echo "task,variant,seed,satisfaction,steps_to_reach" >"$csv"
+runs=()
+for task in "${tasks[@]}"; do
+  for method in "${methods[@]}"; do
+    for seed in "${seeds[@]}"; do
+      r="$out/$method/point-$task-$seed/result.txt"
+      sat=$(grep '^satisfaction:' "$r" | awk '{print $2}')
+      steps=$(grep '^steps to reach:' "$r" | awk '{print $4}')
+      echo "$task,$method,$seed,$sat,${steps:--}" >>"$csv"
+      runs+=(--run "$task:$method:$out/$method/point-$task-$seed")
+    done
+  done
+done
+for task in "${tasks[@]}"; do
+  for method in "${methods[@]}"; do
+    printf '%s %s over seeds %s: satisfaction %s, steps to reach %s\n' "$task" "$method" "${seeds[*]}" \
+      "$(grep "^$task,$method," "$csv" | cut -d, -f4 | summary)" \
+      "$(grep "^$task,$method," "$csv" | cut -d, -f5 | grep -v -- - | summary)"
+  done
+done
+"$bin" plot curves "${runs[@]}" --out "$out/fig3-point.png" --force
+"$bin" plot curves "${runs[@]}" --out "$out/fig3-point.svg" --force
