@@ -140,3 +140,100 @@ fn the_spec_score_is_the_robustness_of_a_finished_run_and_finite_for_an_unfinish
     let s = spec.score(&[trajectory[0].clone()], short, &[]);
     assert!((s - (0.6 - 0.7)).abs() < 1e-9, "{s}");
 }
+
+mod reward_machines {
+    use std::collections::BTreeSet;
+    use std::path::Path;
+
+    use schrl::baseline::reward_machine::{Labels, RewardMachine};
+    use schrl::task::{Task, TaskKind};
+
+    fn labels(events: &[&str]) -> Labels {
+        Labels(events.iter().map(|e| e.to_string()).collect::<BTreeSet<_>>())
+    }
+
+    /// Runs `m` over `trace` from its initial state: the states visited and the return.
+    fn run(m: &RewardMachine, trace: &[&[&str]]) -> (Vec<String>, f64) {
+        let (mut u, mut total, mut seen) = (m.initial, 0.0, vec![]);
+        for events in trace {
+            let (next, r) = m.step(u, &labels(events));
+            u = next;
+            total += r;
+            seen.push(m.states[u].clone());
+        }
+        (seen, total)
+    }
+
+    #[test]
+    fn the_sequence_machine_advances_only_on_the_next_goal_in_order() {
+        let m = RewardMachine::shipped(&Task::point(TaskKind::Seq)).unwrap();
+        let (seen, total) = run(&m, &[&[], &["g1"], &["g0"], &["g0"], &["g2"], &["g1"], &["g2"], &["g3"]]);
+        assert_eq!(seen, ["u0", "u0", "u1", "u1", "u1", "u2", "u3", "done"]);
+        assert_eq!(total, 4.0);
+        assert!(m.terminal[m.states.iter().position(|s| s == "done").unwrap()]);
+        let (seen, total) = run(&m, &[&["g0"], &["collision", "g1"]]);
+        assert_eq!(seen, ["u1", "fail"], "a collision wins over progress");
+        assert_eq!(total, 0.0);
+    }
+
+    #[test]
+    fn the_coverage_machine_accepts_any_order() {
+        let m = RewardMachine::shipped(&Task::point(TaskKind::Cover)).unwrap();
+        let (seen, total) = run(&m, &[&["g2"], &["g0"], &["g2"], &["g3"], &["g1"]]);
+        assert_eq!(seen, ["v2", "v02", "v02", "v023", "all"]);
+        assert_eq!(total, 4.0);
+    }
+
+    #[test]
+    fn the_branch_machine_holds_to_the_first_pair_chosen() {
+        let m = RewardMachine::shipped(&Task::point(TaskKind::Branch)).unwrap();
+        let (seen, _) = run(&m, &[&["a1"], &["b0"], &["b1"]]);
+        assert_eq!(seen, ["after_a1", "after_a1", "done"]);
+    }
+
+    #[test]
+    fn the_signal_machine_pays_corners_until_the_counter_then_the_final_goal() {
+        let m = RewardMachine::shipped(&Task::point(TaskKind::Signal)).unwrap();
+        let trace: &[&[&str]] =
+            &[&["l0"], &["l0"], &["final"], &["l1"], &["l2", "counter"], &["final", "counter"]];
+        let (seen, total) = run(&m, trace);
+        assert_eq!(seen, ["at_l0", "at_l0", "at_l0", "at_l1", "at_l1", "done"]);
+        assert_eq!(total, 3.0);
+    }
+
+    #[test]
+    fn the_loop_machine_never_pays_the_same_corner_twice_in_a_row() {
+        let m = RewardMachine::shipped(&Task::point(TaskKind::Loop)).unwrap();
+        let (seen, total) = run(&m, &[&["l0"], &["l0"], &["l3"], &["l0"]]);
+        assert_eq!(seen, ["at_l0", "at_l0", "at_l3", "at_l0"]);
+        assert_eq!(total, 3.0);
+        assert!(m.options().contains(&(m.initial, 1)), "edges that leave a state are options");
+    }
+
+    #[test]
+    fn events_are_goals_the_robot_is_in_collisions_and_the_counter() {
+        let task = Task::point(TaskKind::Signal);
+        let final_goal = task.goals.iter().find(|g| g.name == "final").unwrap().center.clone();
+        assert_eq!(Labels::of(&task, &final_goal, false, 3.0), labels(&["final"]));
+        assert_eq!(Labels::of(&task, &[-2.0, -2.0], true, 10.0), labels(&["collision", "counter", "l0"]));
+    }
+
+    #[test]
+    fn a_bad_machine_file_is_refused_with_where_and_why() {
+        let task = Task::point(TaskKind::Seq);
+        let parse =
+            |text: &str| RewardMachine::parse(Path::new("m.toml"), text, &task).unwrap_err().to_string();
+        let edge = "[[edge]]\nfrom = \"u0\"\nto = \"u1\"\non = \"g9\"\nreward = 1.0\n";
+        let e = parse(&format!("initial = \"u0\"\n{edge}"));
+        assert!(
+            e.starts_with("m.toml: edge 1 (u0 -> u1): unknown event 'g9'") && e.contains("g0, g1"),
+            "{e}"
+        );
+        let e = parse("initial = \"u0\"\nedge = 3\n");
+        assert!(e.contains("line 2, column"), "{e}");
+        let e = parse(&format!("initial = \"u0\"\nterminal = [\"nowhere\"]\n{}", edge.replace("g9", "g0")));
+        assert!(e.contains("terminal state 'nowhere'"), "{e}");
+        let counter = parse(&format!("initial = \"u0\"\n{}", edge.replace("g9", "counter")));
+        assert!(counter.contains("unknown event 'counter'"), "Seq has no counter: {counter}");
+    }
+}

@@ -193,6 +193,38 @@ impl TanhMlp {
         d_out: &[f32],
         grads: &mut [f32],
     ) {
+        self.backward_to(params, x, n, cache, d_out, grads, None);
+    }
+
+    /// [`TanhMlp::backward`], also writing the gradient with respect to the inputs
+    /// into `d_x` (`n × input`; e.g. a critic's `∂Q/∂a` for a deterministic policy
+    /// gradient).
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward_with_input(
+        &self,
+        params: &[f32],
+        x: &[f32],
+        n: usize,
+        cache: &mut MlpCache,
+        d_out: &[f32],
+        grads: &mut [f32],
+        d_x: &mut [f32],
+    ) {
+        assert_eq!(d_x.len(), n * self.input_dim(), "input-gradient length");
+        self.backward_to(params, x, n, cache, d_out, grads, Some(d_x));
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn backward_to(
+        &self,
+        params: &[f32],
+        x: &[f32],
+        n: usize,
+        cache: &mut MlpCache,
+        d_out: &[f32],
+        grads: &mut [f32],
+        d_x: Option<&mut [f32]>,
+    ) {
         assert_eq!(grads.len(), self.num_params(), "gradient slice length");
         assert_eq!(d_out.len(), n * self.output_dim(), "output-gradient length");
         assert_eq!(cache.layers.len(), self.num_layers(), "backward needs a forward pass first");
@@ -223,6 +255,11 @@ impl TanhMlp {
                 std::mem::swap(&mut delta, &mut prev);
             }
         }
+        if let Some(d_x) = d_x {
+            // d x (n×input) = delta (n×o) · W₀ (o×input); inputs have no activation.
+            let (i, o) = (self.sizes[0], self.sizes[1]);
+            gemm((n, o, i), &delta, (o, 1), &params[self.layer_ranges(0).0], (i, 1), 0.0, d_x);
+        }
         cache.delta = delta;
         cache.delta_prev = prev;
     }
@@ -231,6 +268,31 @@ impl TanhMlp {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_input_gradient_matches_finite_differences() {
+        let mlp = TanhMlp::new(&[3, 5, 4, 2]);
+        let params: Vec<f32> = (0..mlp.num_params()).map(|k| ((k * 37 % 19) as f32 - 9.0) * 0.07).collect();
+        let x = [0.3f32, -0.7, 0.5, 0.1, 0.9, -0.2];
+        let w = [0.6f32, -1.3, 0.2, 0.8];
+        let loss = |x: &[f32]| -> f64 {
+            let mut c = MlpCache::default();
+            let y = mlp.forward(&params, x, 2, &mut c);
+            y.iter().zip(&w).map(|(a, b)| (*a as f64) * (*b as f64)).sum()
+        };
+        let mut cache = MlpCache::default();
+        mlp.forward(&params, &x, 2, &mut cache);
+        let mut grads = vec![0.0; mlp.num_params()];
+        let mut dx = vec![0.0; 6];
+        mlp.backward_with_input(&params, &x, 2, &mut cache, &w, &mut grads, &mut dx);
+        for k in 0..6 {
+            let (mut up, mut down) = (x, x);
+            up[k] += 1e-2;
+            down[k] -= 1e-2;
+            let fd = (loss(&up) - loss(&down)) / 2e-2;
+            assert!((fd - dx[k] as f64).abs() < 2e-3, "input {k}: {fd} vs {}", dx[k]);
+        }
+    }
 
     #[test]
     fn fast_tanh_is_within_5e_7_of_tanh() {

@@ -692,7 +692,7 @@ pub fn hard_robustness(spec: &Spec, paths: &Tensor) -> candle_core::Result<Vec<f
 }
 
 /// A TOML error with its line and column.
-fn toml_message(e: &toml::de::Error, text: &str) -> String {
+pub(crate) fn toml_message(e: &toml::de::Error, text: &str) -> String {
     match e.span() {
         Some(span) => {
             let before = &text[..span.start.min(text.len())];
