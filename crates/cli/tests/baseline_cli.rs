@@ -89,3 +89,42 @@ fn baseline_eval_names_a_directory_that_is_not_a_run() {
     assert!(text(&o.stderr).contains("nothing"), "{}", text(&o.stderr));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn crm_trains_with_a_machine_file_resumes_and_evaluates() {
+    let dir = workspace("crm-cli");
+    let machine = dir.join("easy.rm.toml");
+    std::fs::write(&machine, "initial = \"u0\"\nterminal = [\"done\"]\n[[edge]]\nfrom = \"u0\"\nto = \"done\"\non = \"g\"\nreward = 1.0\n")
+        .unwrap();
+    let (task, machine) = (dir.join("easy.toml"), machine.to_str().unwrap().to_string());
+    let run = dir.join("run");
+    let (task, out) = (task.to_str().unwrap(), run.to_str().unwrap());
+    let train = |extra: &[&str]| {
+        let mut a = vec!["baseline", "train", "--algo", "crm", "--out", out];
+        a.extend_from_slice(extra);
+        schrl(&a)
+    };
+    // A user task has no shipped machine: the error says what to do.
+    let o = train(&["--task", task, "--steps", "4000"]);
+    assert!(
+        !o.status.success() && text(&o.stderr).contains("no shipped reward machine"),
+        "{}",
+        text(&o.stderr)
+    );
+    let o = train(&["--task", task, "--machine", &machine, "--steps", "4000", "--eval-groups", "1"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["kind"], "crm");
+    assert!(manifest["files"]["crm.safetensors"]["sha256"].is_string());
+    let other = dir.join("other.rm.toml");
+    std::fs::write(&other, std::fs::read_to_string(&machine).unwrap().replace("1.0", "2.0")).unwrap();
+    let o = train(&["--resume", "--machine", other.to_str().unwrap()]);
+    assert!(!o.status.success() && text(&o.stderr).contains("--machine"), "{}", text(&o.stderr));
+    let o = train(&["--resume", "--steps", "8000", "--eval-groups", "0"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(std::fs::read_to_string(run.join("metrics.jsonl")).unwrap().lines().count(), 2);
+    let o = schrl(&["baseline", "eval", "--ckpt", out, "--groups", "1", "--per-group", "10"]);
+    assert!(o.status.success() && text(&o.stdout).contains("satisfaction: "), "{}", text(&o.stderr));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

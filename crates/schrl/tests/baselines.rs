@@ -4,8 +4,9 @@
 
 use std::path::Path;
 
+use schrl::baseline::flat::{MeanPolicy, evaluate};
 use schrl::baseline::htltl;
-use schrl::baseline::tltl::{TltlSettings, TltlTrainer, evaluate};
+use schrl::baseline::tltl::{TltlSettings, TltlTrainer};
 use schrl::control::{ControlConfig, ControlTrainer, PpoConfig};
 use schrl::plan::cpg::{CpgConfig, Method};
 use schrl::run::joint::{JointConfig, JointTrainer};
@@ -52,12 +53,12 @@ fn tltl_raises_the_spec_score_and_satisfies_an_easy_spec_well_above_chance() {
     let mut scores = vec![];
     while !t.finished() {
         let m = t.train_update().unwrap();
-        scores.extend(m.score);
+        scores.extend(m.episodes.score);
     }
     let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
     let (early, late) = (mean(&scores[..5]), mean(&scores[scores.len() - 5..]));
     assert!(late > early + 0.1, "spec score did not rise: {early:.3} → {late:.3}");
-    let e = evaluate(&t.task, &t.controller(), (1, 50), 7).unwrap();
+    let e = evaluate(&t.task, &mut MeanPolicy::new(&t.controller()), (1, 50), 7).unwrap();
     // An untrained policy satisfies it in about 2 % of episodes.
     assert!(e.satisfaction[0] >= 0.3, "satisfaction {:?}", e.satisfaction);
     assert_eq!(e.collisions, 0);
@@ -84,7 +85,7 @@ fn a_resumed_tltl_run_continues_exactly_as_one_that_never_stopped() {
     let mut resumed = store::tltl::load(&dir).unwrap();
     let a = straight.train_update().unwrap();
     let b = resumed.train_update().unwrap();
-    assert_eq!(a.score, b.score);
+    assert_eq!(a.episodes, b.episodes);
     assert_eq!(straight.policy.params, resumed.policy.params);
     assert_eq!(straight.raw_obs, resumed.raw_obs);
     assert_eq!(straight.trajectories, resumed.trajectories);
@@ -235,5 +236,84 @@ mod reward_machines {
         assert!(e.contains("terminal state 'nowhere'"), "{e}");
         let counter = parse(&format!("initial = \"u0\"\n{}", edge.replace("g9", "counter")));
         assert!(counter.contains("unknown event 'counter'"), "Seq has no counter: {counter}");
+    }
+}
+
+mod crm {
+    use schrl::baseline::crm::{CHUNK, CrmSettings, CrmTrainer};
+    use schrl::baseline::reward_machine::RewardMachine;
+    use schrl::baseline::td3::Td3Config;
+    use schrl::store::{self, Existing, RunKind, RunWriter};
+    use schrl::task::{Task, TaskKind};
+    use sim::Robot;
+
+    /// Seq with every episode starting at the centre of g1.
+    fn seq_from_g1(td3: Td3Config, steps: usize) -> CrmSettings {
+        let seq = Task::point(TaskKind::Seq);
+        let toml = seq
+            .toml
+            .replace("low = [1.0, -2.0]", "low = [-1.0, 2.0]")
+            .replace("high = [2.0, -1.0]", "high = [-1.0, 2.0]");
+        assert_ne!(toml, seq.toml);
+        CrmSettings {
+            robot: Robot::Point,
+            task_toml: toml,
+            task_spec: seq.spec.clone(),
+            machine: RewardMachine::shipped_text("seq").unwrap().into(),
+            seed: 4,
+            steps,
+            td3,
+            eval_groups: 0,
+            save_every: 1,
+        }
+    }
+
+    #[test]
+    fn every_real_step_adds_one_counterfactual_experience_per_live_machine_state() {
+        let mut t = CrmTrainer::new(seq_from_g1(Td3Config::default(), 1)).unwrap();
+        let live: Vec<usize> = (0..t.machine.len()).filter(|u| !t.machine.terminal[*u]).collect();
+        t.train_chunk().unwrap();
+        let name = |u: u32| t.machine.states[u as usize].clone();
+        let b = &t.buffer;
+        assert_eq!(b.len(), live.len(), "one experience per live state (u0..u3)");
+        // The robot is in g1 throughout its first step: only u1 moves on, to u2, paid 1.
+        let states: Vec<String> = b.states.iter().map(|u| name(*u)).collect();
+        let next: Vec<String> = b.next_states.iter().map(|u| name(*u)).collect();
+        assert_eq!(states, ["u0", "u1", "u2", "u3"]);
+        assert_eq!(next, ["u0", "u2", "u2", "u3"]);
+        assert_eq!(b.rewards, [0.0, 1.0, 0.0, 0.0]);
+        assert!(b.dones.iter().all(|d| !d));
+        // They share the real step's observations and action.
+        let od = b.obs_dim;
+        for k in 1..b.len() {
+            assert_eq!(b.obs[..od], b.obs[k * od..(k + 1) * od]);
+            assert_eq!(b.next_obs[..od], b.next_obs[k * od..(k + 1) * od]);
+            assert_eq!(b.actions[..b.act_dim], b.actions[k * b.act_dim..(k + 1) * b.act_dim]);
+        }
+        // The real machine moved as u0 would: still u0 (g0 first).
+        assert_eq!(t.machine.states[t.state], "u0");
+    }
+
+    #[test]
+    fn a_resumed_crm_run_continues_exactly_as_one_that_never_stopped() {
+        let td3 = Td3Config { learning_starts: CHUNK - 500, buffer: 10_000, ..Td3Config::default() };
+        let settings = seq_from_g1(td3, 3 * CHUNK);
+        let dir = std::env::temp_dir().join(format!("schrl-crm-resume-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut run = RunWriter::create(&dir, RunKind::Crm, &settings, Existing::Refuse).unwrap();
+        let mut straight = CrmTrainer::new(settings.clone()).unwrap();
+        let mut stopped = CrmTrainer::new(settings).unwrap();
+        straight.train_chunk().unwrap();
+        let first = stopped.train_chunk().unwrap();
+        assert!(first.critic_loss.is_some(), "learning started within the first chunk");
+        run.save(|f| store::crm::save_into(f, &stopped)).unwrap();
+        drop((run, stopped));
+        let mut resumed = store::crm::load(&dir).unwrap();
+        let (a, b) = (straight.train_chunk().unwrap(), resumed.train_chunk().unwrap());
+        assert_eq!((a.critic_loss, &a.episodes), (b.critic_loss, &b.episodes));
+        assert_eq!(straight.td3.actor_params, resumed.td3.actor_params);
+        assert_eq!(straight.buffer, resumed.buffer);
+        assert_eq!((straight.state, &straight.raw_obs), (resumed.state, &resumed.raw_obs));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -5,10 +5,17 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use schrl::baseline::tltl::{self, TltlMetrics, TltlSettings, TltlTrainer};
+use schrl::baseline::crm::{CrmMetrics, CrmSettings, CrmTrainer};
+use schrl::baseline::flat::{self, EpisodeSummary, MeanPolicy};
+use schrl::baseline::reward_machine::RewardMachine;
+use schrl::baseline::td3::Td3Config;
+use schrl::baseline::tltl::{TltlMetrics, TltlSettings, TltlTrainer};
 use schrl::control::PpoConfig;
 use schrl::run::evaluate::{EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task};
-use schrl::store::{self, MetricsLog, RunKind, RunWriter, StoreError};
+use schrl::store::{self, Checkpoint, MetricsLog, RunKind, RunWriter, SaveFiles, StoreError};
+use schrl::task::Task;
+use serde::Serialize;
+use serde::de::DeserializeOwned;
 use sim::Robot;
 use sim::render::{ChartPanel, Series};
 
@@ -33,6 +40,8 @@ pub enum Algo {
     /// SCHRL without the Lagrange term: the planner on the plain policy gradient of
     /// ρ + r_l (`schrl train --method pg`).
     Htltl,
+    /// Counterfactual reward machines on TD3 (Icarte et al. 2022).
+    Crm,
 }
 
 /// The flags every baseline takes.
@@ -48,7 +57,7 @@ pub struct CommonArgs {
     /// Seed of everything [default: 0].
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Environment steps [default: 4000000 for tltl, SCHRL's 1 M of the general
+    /// Environment steps [default: 4000000 for tltl and crm, SCHRL's 1 M of the general
     /// controller and 3 M of joint training; htltl: SCHRL's].
     #[arg(long)]
     pub steps: Option<usize>,
@@ -57,7 +66,8 @@ pub struct CommonArgs {
     /// Evaluation groups of 100 runs after training; 0: none [default: 5].
     #[arg(long, value_parser = super::count::<0, 100>)]
     pub eval_groups: Option<usize>,
-    /// Updates (tltl) or iterations (htltl) between checkpoints [default: 25 / 50].
+    /// Updates (tltl), iterations (htltl) or 4000-step chunks (crm) between checkpoints
+    /// [default: 25 / 50 / 25].
     #[arg(long)]
     pub save_every: Option<usize>,
 }
@@ -70,6 +80,10 @@ pub struct TrainArgs {
     algo: Algo,
     #[command(flatten)]
     common: CommonArgs,
+    /// The reward machine (crm): a machine file [default: the task's shipped machine,
+    /// tasks/machines/<task>.toml].
+    #[arg(long)]
+    machine: Option<PathBuf>,
 }
 
 /// Arguments of `schrl baseline eval`.
@@ -95,127 +109,315 @@ pub struct EvalArgs {
     force: bool,
 }
 
-/// TLTL's budget when `--steps` is not given: SCHRL's whole budget on Point (1 M steps
+/// The default budget of the flat baselines: SCHRL's whole budget on Point (1 M steps
 /// of the general controller, 3 M of joint training), so the curves compare.
-const TLTL_STEPS: usize = 4_000_000;
-/// PPO updates between TLTL checkpoints when `--save-every` is not given.
-const TLTL_SAVE_EVERY: usize = 25;
+const FLAT_STEPS: usize = 4_000_000;
+/// Checkpoint spacing when `--save-every` is not given (PPO updates or CRM chunks of
+/// 4000 steps: 100 000 environment steps).
+const FLAT_SAVE_EVERY: usize = 25;
 
 /// Runs `schrl baseline ...`.
 pub fn run(cmd: Command) -> Result<()> {
     match cmd {
         Command::Train(args) => match args.algo {
             Algo::Htltl => super::train::train(super::train::TrainArgs::htltl(args.common)),
-            Algo::Tltl => train_tltl(args.common),
+            Algo::Tltl => train_flat::<TltlTrainer>(&args),
+            Algo::Crm => train_flat::<CrmTrainer>(&args),
         },
         Command::Eval(args) => eval(args),
     }
 }
 
-impl CommonArgs {
-    /// The settings of a new TLTL run.
-    fn tltl_settings(&self) -> Result<TltlSettings> {
-        let Some(task_arg) = &self.task else { bail!("--task is required for a new run") };
-        let task = super::task::resolve(self.robot, task_arg)?;
-        let s = TltlSettings {
+/// What the training loop needs of a flat baseline's settings.
+trait FlatSettings: Serialize + DeserializeOwned + Clone {
+    /// The kind of run these settings are of.
+    const KIND: RunKind;
+    /// The settings of a new run from the flags.
+    fn new(args: &TrainArgs, task: &Task) -> Result<Self>;
+    /// Robot, task texts and seed: what a resumed run may not change.
+    fn identity(&self) -> (Robot, &str, &str, u64);
+    /// Flags a resumed run refuses when they differ, beyond robot, task and seed.
+    fn conflicts(&self, args: &TrainArgs) -> Result<Vec<(&'static str, bool)>>;
+    /// `(steps, eval_groups, save_every)`, mutable (the flags a resumed run may change).
+    fn budget(&mut self) -> (&mut usize, &mut usize, &mut usize);
+}
+
+/// What the training loop needs of a flat baseline's trainer.
+trait FlatBaseline: Sized {
+    type Settings: FlatSettings;
+    type Metrics: Serialize + DeserializeOwned + EpisodeStats;
+    const KIND: RunKind = <Self::Settings as FlatSettings>::KIND;
+    fn create(s: Self::Settings) -> Result<Self>;
+    fn load(ckpt: &Checkpoint) -> Result<Self, StoreError>;
+    fn save(&self, files: &mut SaveFiles) -> Result<(), StoreError>;
+    fn settings(&mut self) -> &mut Self::Settings;
+    fn task(&self) -> &Task;
+    /// `(done, total)` in the progress bar's units.
+    fn progress(&self) -> (u64, u64);
+    fn finished(&self) -> bool;
+    fn train(&mut self) -> Result<Self::Metrics>;
+    fn env_steps(&self) -> usize;
+    fn evaluate(&self, sizes: (usize, usize), seed: u64) -> Result<TaskEval>;
+}
+
+/// A metrics line: its index in the log (update or chunk) and its episodes.
+trait EpisodeStats {
+    fn index(&self) -> usize;
+    fn summary(&self) -> &EpisodeSummary;
+}
+
+impl FlatSettings for TltlSettings {
+    const KIND: RunKind = RunKind::Tltl;
+    fn new(args: &TrainArgs, task: &Task) -> Result<Self> {
+        let c = &args.common;
+        Ok(TltlSettings {
             robot: task.robot,
             task_toml: task.toml.clone(),
             task_spec: task.spec.clone(),
-            seed: self.seed.unwrap_or(0),
-            steps: self.steps.unwrap_or(TLTL_STEPS),
+            seed: c.seed.unwrap_or(0),
+            steps: c.steps.unwrap_or(FLAT_STEPS),
             ppo: PpoConfig::reference(),
-            eval_groups: self.eval_groups.unwrap_or(EVAL_GROUPS),
-            save_every: self.save_every.unwrap_or(TLTL_SAVE_EVERY),
-        };
-        check(&s)?;
-        Ok(s)
+            eval_groups: c.eval_groups.unwrap_or(EVAL_GROUPS),
+            save_every: c.save_every.unwrap_or(FLAT_SAVE_EVERY),
+        })
     }
-
-    /// The saved settings of a resumed TLTL run with the flags that may change
-    /// (`--steps`, `--eval-groups`, `--save-every`) applied; others that differ are
-    /// refused by name.
-    fn tltl_resumed(&self, saved: &TltlSettings) -> Result<TltlSettings> {
-        use super::differs;
-        let task_differs = super::task::differs_from_saved(
-            self.robot,
-            self.task.as_deref(),
-            saved.robot,
-            (&saved.task_toml, &saved.task_spec),
-        )?;
-        super::refuse_conflicts(
-            RunKind::Tltl,
-            &[
-                ("--robot", differs(&self.robot, &saved.robot)),
-                ("--task", task_differs),
-                ("--seed", differs(&self.seed, &saved.seed)),
-            ],
-        )?;
-        let s = TltlSettings {
-            steps: self.steps.unwrap_or(saved.steps),
-            eval_groups: self.eval_groups.unwrap_or(saved.eval_groups),
-            save_every: self.save_every.unwrap_or(saved.save_every),
-            ..saved.clone()
-        };
-        check(&s)?;
-        Ok(s)
+    fn identity(&self) -> (Robot, &str, &str, u64) {
+        (self.robot, &self.task_toml, &self.task_spec, self.seed)
+    }
+    fn conflicts(&self, args: &TrainArgs) -> Result<Vec<(&'static str, bool)>> {
+        Ok(vec![("--machine", args.machine.is_some())])
+    }
+    fn budget(&mut self) -> (&mut usize, &mut usize, &mut usize) {
+        (&mut self.steps, &mut self.eval_groups, &mut self.save_every)
     }
 }
 
-fn check(s: &TltlSettings) -> Result<()> {
-    if s.save_every == 0 {
+impl FlatSettings for CrmSettings {
+    const KIND: RunKind = RunKind::Crm;
+    fn new(args: &TrainArgs, task: &Task) -> Result<Self> {
+        let c = &args.common;
+        Ok(CrmSettings {
+            robot: task.robot,
+            task_toml: task.toml.clone(),
+            task_spec: task.spec.clone(),
+            machine: machine_text(args.machine.as_deref(), task)?,
+            seed: c.seed.unwrap_or(0),
+            steps: c.steps.unwrap_or(FLAT_STEPS),
+            td3: Td3Config::default(),
+            eval_groups: c.eval_groups.unwrap_or(EVAL_GROUPS),
+            save_every: c.save_every.unwrap_or(FLAT_SAVE_EVERY),
+        })
+    }
+    fn identity(&self) -> (Robot, &str, &str, u64) {
+        (self.robot, &self.task_toml, &self.task_spec, self.seed)
+    }
+    fn conflicts(&self, args: &TrainArgs) -> Result<Vec<(&'static str, bool)>> {
+        let differs = match &args.machine {
+            None => false,
+            Some(path) => {
+                let here = std::path::Path::new("settings");
+                let task = Task::from_texts(here, &self.task_toml, here, &self.task_spec)?;
+                machine_text(Some(path), &task)? != self.machine
+            }
+        };
+        Ok(vec![("--machine", differs)])
+    }
+    fn budget(&mut self) -> (&mut usize, &mut usize, &mut usize) {
+        (&mut self.steps, &mut self.eval_groups, &mut self.save_every)
+    }
+}
+
+/// The reward machine's text: the file given, or the task's shipped machine; checked
+/// against the task.
+fn machine_text(path: Option<&std::path::Path>, task: &Task) -> Result<String> {
+    Ok(match path {
+        Some(p) => {
+            RewardMachine::from_file(p, task)?;
+            schrl::task::read_text(p, schrl::task::MAX_TASK_FILE_BYTES)?
+        }
+        None => {
+            RewardMachine::shipped(task)?;
+            RewardMachine::shipped_text(&task.name).expect("a machine that loaded is shipped").to_string()
+        }
+    })
+}
+
+impl EpisodeStats for TltlMetrics {
+    fn index(&self) -> usize {
+        self.update
+    }
+    fn summary(&self) -> &EpisodeSummary {
+        &self.episodes
+    }
+}
+
+impl EpisodeStats for CrmMetrics {
+    fn index(&self) -> usize {
+        self.chunk
+    }
+    fn summary(&self) -> &EpisodeSummary {
+        &self.episodes
+    }
+}
+
+impl FlatBaseline for TltlTrainer {
+    type Settings = TltlSettings;
+    type Metrics = TltlMetrics;
+    fn create(s: TltlSettings) -> Result<Self> {
+        Ok(TltlTrainer::new(s)?)
+    }
+    fn load(ckpt: &Checkpoint) -> Result<Self, StoreError> {
+        store::tltl::load_from(ckpt)
+    }
+    fn save(&self, files: &mut SaveFiles) -> Result<(), StoreError> {
+        store::tltl::save_into(files, self)
+    }
+    fn settings(&mut self) -> &mut TltlSettings {
+        &mut self.settings
+    }
+    fn task(&self) -> &Task {
+        &self.task
+    }
+    fn progress(&self) -> (u64, u64) {
+        (self.updates as u64, self.total_updates() as u64)
+    }
+    fn finished(&self) -> bool {
+        TltlTrainer::finished(self)
+    }
+    fn train(&mut self) -> Result<TltlMetrics> {
+        Ok(self.train_update()?)
+    }
+    fn env_steps(&self) -> usize {
+        self.steps
+    }
+    fn evaluate(&self, sizes: (usize, usize), seed: u64) -> Result<TaskEval> {
+        Ok(flat::evaluate(&self.task, &mut MeanPolicy::new(&self.controller()), sizes, seed)?)
+    }
+}
+
+impl FlatBaseline for CrmTrainer {
+    type Settings = CrmSettings;
+    type Metrics = CrmMetrics;
+    fn create(s: CrmSettings) -> Result<Self> {
+        Ok(CrmTrainer::new(s)?)
+    }
+    fn load(ckpt: &Checkpoint) -> Result<Self, StoreError> {
+        store::crm::load_from(ckpt)
+    }
+    fn save(&self, files: &mut SaveFiles) -> Result<(), StoreError> {
+        store::crm::save_into(files, self)
+    }
+    fn settings(&mut self) -> &mut CrmSettings {
+        &mut self.settings
+    }
+    fn task(&self) -> &Task {
+        &self.task
+    }
+    fn progress(&self) -> (u64, u64) {
+        (self.steps as u64, self.settings.steps as u64)
+    }
+    fn finished(&self) -> bool {
+        CrmTrainer::finished(self)
+    }
+    fn train(&mut self) -> Result<CrmMetrics> {
+        Ok(self.train_chunk()?)
+    }
+    fn env_steps(&self) -> usize {
+        self.steps
+    }
+    fn evaluate(&self, sizes: (usize, usize), seed: u64) -> Result<TaskEval> {
+        Ok(flat::evaluate(&self.task, &mut self.policy(), sizes, seed)?)
+    }
+}
+
+/// The settings of a run: new from the flags, or the saved ones with the flags that
+/// may change (`--steps`, `--eval-groups`, `--save-every`) applied; other flags that
+/// differ are refused by name.
+fn settings_of<S: FlatSettings>(args: &TrainArgs, saved: Option<&S>) -> Result<S> {
+    let c = &args.common;
+    let mut s = match saved {
+        None => {
+            let Some(task_arg) = &c.task else { bail!("--task is required for a new run") };
+            S::new(args, &super::task::resolve(c.robot, task_arg)?)?
+        }
+        Some(saved) => {
+            let (robot, toml, spec, seed) = saved.identity();
+            let task_differs =
+                super::task::differs_from_saved(c.robot, c.task.as_deref(), robot, (toml, spec))?;
+            let mut conflicts = vec![
+                ("--robot", super::differs(&c.robot, &robot)),
+                ("--task", task_differs),
+                ("--seed", super::differs(&c.seed, &seed)),
+            ];
+            conflicts.extend(saved.conflicts(args)?);
+            super::refuse_conflicts(S::KIND, &conflicts)?;
+            saved.clone()
+        }
+    };
+    let (steps, groups, every) = s.budget();
+    *steps = c.steps.unwrap_or(*steps);
+    *groups = c.eval_groups.unwrap_or(*groups);
+    *every = c.save_every.unwrap_or(*every);
+    if *every == 0 {
         bail!("--save-every must be at least 1");
     }
-    if s.steps == 0 {
+    if *steps == 0 {
         bail!("--steps must be at least 1");
     }
-    Ok(())
+    Ok(s)
 }
 
-fn train_tltl(args: CommonArgs) -> Result<()> {
-    let out = args.run.out.clone();
+/// `schrl baseline train` for a flat baseline: progress, metrics, checkpoints, resume,
+/// the training curve, then the evaluation.
+fn train_flat<B: FlatBaseline>(args: &TrainArgs) -> Result<()> {
+    let out = args.common.run.out.clone();
     let start = std::time::Instant::now();
-    let (mut run, mut trainer, resumed) = if args.run.resume {
-        let (mut run, ckpt) = RunWriter::resume(&out, RunKind::Tltl).map_err(super::store_error)?;
-        let settings = args.tltl_resumed(&run.settings().map_err(super::store_error)?)?;
+    let (mut run, mut trainer, resumed) = if args.common.run.resume {
+        let (mut run, ckpt) = RunWriter::resume(&out, B::KIND).map_err(super::store_error)?;
+        let saved: B::Settings = run.settings().map_err(super::store_error)?;
+        let settings = settings_of(args, Some(&saved))?;
         run.set_settings(&settings).map_err(super::store_error)?;
         let trainer = if ckpt.has_files() {
-            let mut t = store::tltl::load_from(&ckpt)?;
-            t.settings = settings;
+            let mut t = B::load(&ckpt)?;
+            *t.settings() = settings;
             t
         } else {
-            TltlTrainer::new(settings)?
+            B::create(settings)?
         };
         (run, trainer, true)
     } else {
-        let settings = args.tltl_settings()?;
-        for w in settings.task()?.warnings() {
+        let settings: B::Settings = settings_of(args, None)?;
+        let trainer = B::create(settings.clone())?;
+        for w in trainer.task().warnings() {
             eprintln!("warning: {w}");
         }
-        let trainer = TltlTrainer::new(settings.clone())?;
-        let run = RunWriter::create(&out, RunKind::Tltl, &settings, args.run.existing())
+        let run = RunWriter::create(&out, B::KIND, &settings, args.common.run.existing())
             .map_err(super::store_error)?;
         (run, trainer, false)
     };
     crate::interrupt::install();
-    let updates = trainer.updates;
+    let steps_done = trainer.env_steps();
     let (mut log, mut history) =
-        MetricsLog::open(&run, resumed, |m: &TltlMetrics| m.update <= updates).map_err(super::store_error)?;
-    let bar = ProgressBar::new(trainer.total_updates() as u64);
-    bar.set_style(ProgressStyle::with_template(
-        "      tltl {bar:40} {pos}/{len} updates {elapsed_precise} {msg}",
-    )?);
-    bar.set_position(trainer.updates as u64);
+        MetricsLog::open(&run, resumed, |m: &B::Metrics| m.summary().env_steps <= steps_done)
+            .map_err(super::store_error)?;
+    let (done, total) = trainer.progress();
+    let bar = ProgressBar::new(total);
+    bar.set_style(ProgressStyle::with_template(&format!(
+        "{:>10} {{bar:40}} {{percent}}% {{elapsed_precise}} {{msg}}",
+        B::KIND.name()
+    ))?);
+    bar.set_position(done);
     let mut interrupted = false;
+    let save_every = trainer.settings().budget().2.to_owned();
     while !trainer.finished() {
-        let m = trainer.train_update()?;
+        let m = trainer.train()?;
         log.append(&m)?;
-        bar.set_position(m.update as u64);
-        let recent = &history[history.len().saturating_sub(19)..];
-        let (score, sat) = window(recent.iter().chain([&m]));
-        bar.set_message(format!("score {score:.3} satisfaction {sat:.2} {:.0} steps/s", m.steps_per_sec));
+        bar.set_position(trainer.progress().0);
         history.push(m);
-        if trainer.updates % trainer.settings.save_every == 0 {
-            run.save(|f| store::tltl::save_into(f, &trainer))?;
+        let (score, sat) = window(&history[history.len().saturating_sub(20)..]);
+        bar.set_message(format!("score {score:.3} satisfaction {sat:.2}"));
+        if history.last().is_some_and(|m| m.index().is_multiple_of(save_every)) {
+            run.save(|f| trainer.save(f))?;
         }
         if crate::interrupt::requested() {
             interrupted = true;
@@ -223,34 +425,36 @@ fn train_tltl(args: CommonArgs) -> Result<()> {
         }
     }
     bar.finish_and_clear();
-    run.save(|f| store::tltl::save_into(f, &trainer))?;
+    run.save(|f| trainer.save(f))?;
     if interrupted {
-        return Err(crate::interrupt::stopped(&out, format!("update {}", trainer.updates)));
+        return Err(crate::interrupt::stopped(&out, format!("step {}", trainer.env_steps())));
     }
     save_curve(&history, &out.join("training_curve.png"))?;
+    let task = trainer.task().clone();
     println!(
-        "trained tltl on {} {} for {} environment steps in {:.1} s; run in {}",
-        trainer.task.robot,
-        trainer.task.name,
-        trainer.steps,
+        "trained {} on {} {} for {} environment steps in {:.1} s; run in {}",
+        B::KIND.name(),
+        task.robot,
+        task.name,
+        trainer.env_steps(),
         start.elapsed().as_secs_f64(),
         out.display()
     );
-    if trainer.settings.eval_groups > 0 {
-        let sizes = (trainer.settings.eval_groups, EVAL_PER_GROUP);
-        let e = tltl::evaluate(&trainer.task, &trainer.controller(), sizes, EVAL_SEED)?;
+    let groups = *trainer.settings().budget().1;
+    if groups > 0 {
+        let e = trainer.evaluate((groups, EVAL_PER_GROUP), EVAL_SEED)?;
         let png = out.join("episodes.png");
-        draw(&trainer.task, &e, &png, true)?;
+        draw(&task, &e, &png, true)?;
         println!("wrote {}", png.display());
         print_eval(&e);
     }
     Ok(())
 }
 
-/// Mean score and satisfaction over `metrics`, weighting each update by its episodes.
-fn window<'a>(metrics: impl Iterator<Item = &'a TltlMetrics>) -> (f64, f64) {
+/// Mean score and satisfaction over `metrics`, weighting each line by its episodes.
+fn window<M: EpisodeStats>(metrics: &[M]) -> (f64, f64) {
     let (mut n, mut score, mut sat) = (0.0, 0.0, 0.0);
-    for m in metrics {
+    for m in metrics.iter().map(EpisodeStats::summary) {
         let k = m.episodes as f64;
         if let (Some(s), Some(f)) = (m.score, m.satisfaction) {
             n += k;
@@ -262,12 +466,14 @@ fn window<'a>(metrics: impl Iterator<Item = &'a TltlMetrics>) -> (f64, f64) {
 }
 
 /// The spec score (top) and satisfaction (below) of training episodes against
-/// environment steps, each over the last 20 updates' episodes.
-fn save_curve(history: &[TltlMetrics], out: &std::path::Path) -> Result<()> {
+/// environment steps, each over the last 20 lines' episodes.
+fn save_curve<M: EpisodeStats>(history: &[M], out: &std::path::Path) -> Result<()> {
     let series = |label: &str, pick: fn((f64, f64)) -> f64| Series {
         label: label.into(),
         points: (0..history.len())
-            .map(|i| (history[i].env_steps as f64, pick(window(history[i.saturating_sub(19)..=i].iter()))))
+            .map(|i| {
+                (history[i].summary().env_steps as f64, pick(window(&history[i.saturating_sub(19)..=i])))
+            })
             .filter(|(_, y)| y.is_finite())
             .collect(),
         band: vec![],
@@ -288,25 +494,37 @@ fn save_curve(history: &[TltlMetrics], out: &std::path::Path) -> Result<()> {
     Ok(())
 }
 
-/// Runs `schrl baseline eval`: a TLTL run's flat policy, or an HTLTL (joint) run's
-/// planner and controller.
+/// Runs `schrl baseline eval`: a TLTL or CRM run's flat policy, or an HTLTL (joint)
+/// run's planner and controller.
 fn eval(args: EvalArgs) -> Result<()> {
     if let Some(out) = &args.out {
         sim::render::check_target(out, args.force)?;
     }
     let sizes = (args.groups, args.per_group);
-    let (task, e): (_, TaskEval) = match store::tltl::load(&args.ckpt) {
-        Ok(t) => {
-            let e = tltl::evaluate(&t.task, &t.controller(), sizes, args.seed)?;
-            (t.task, e)
+    let kind = Checkpoint::open(&args.ckpt, RunKind::Tltl).map(|_| RunKind::Tltl).or_else(|e| match e {
+        StoreError::OtherKind { found, .. } => Ok(found),
+        e => Err(super::store_error(e)),
+    })?;
+    let (task, e): (Task, TaskEval) = match kind {
+        RunKind::Tltl => {
+            let t = store::tltl::load(&args.ckpt).map_err(super::store_error)?;
+            (t.task.clone(), FlatBaseline::evaluate(&t, sizes, args.seed)?)
         }
-        Err(StoreError::OtherKind { found: RunKind::Joint, .. }) => {
+        RunKind::Crm => {
+            let t = store::crm::load(&args.ckpt).map_err(super::store_error)?;
+            (t.task.clone(), FlatBaseline::evaluate(&t, sizes, args.seed)?)
+        }
+        RunKind::Joint => {
             let t = store::joint::load(&args.ckpt).map_err(super::store_error)?;
             let plans = Plans::Mean(t.plan.planner());
             let e = evaluate_task(&t.task, plans, &t.control.controller(), sizes, args.seed)?;
             (t.task.clone(), e)
         }
-        Err(e) => return Err(super::store_error(e)),
+        other => bail!(
+            "{}: a {other} run ({}) is not a baseline; expected a run of `schrl baseline train` or `schrl train`",
+            args.ckpt.display(),
+            other.command()
+        ),
     };
     print_eval(&e);
     if let Some(out) = &args.out {

@@ -177,7 +177,7 @@ fn scores(dir: &Path) -> Result<Curve> {
                 format!("{}: no settings.total_steps", general.join(schrl::store::MANIFEST).display())
             })?
         }
-        Some("tltl") => 0.0,
+        Some("tltl" | "crm") => 0.0,
         other => bail!(
             "{}: a {} run has no spec score; expected a run of `schrl train` or `schrl baseline train`",
             dir.display(),

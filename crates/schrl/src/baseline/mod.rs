@@ -5,15 +5,19 @@
 //!   joint training ([`crate::run::joint`]) with the planner on the plain policy
 //!   gradient of `r_h = ρ + r_l` ([`crate::plan::cpg::Method::Pg`]). It needs no code of
 //!   its own: [`htltl`] turns SCHRL's settings into it.
+//! * [`flat`] — what policies without a planner observe, and how their episodes are
+//!   judged and evaluated.
 //! * [`tltl`] — one flat PPO policy rewarded by the spec's robustness.
 //! * [`reward_machine`] — reward machines (Icarte et al. 2022): events, transitions,
 //!   the shipped machines of the five tasks.
 //! * [`replay`] and [`td3`] — the off-policy pieces: a replay buffer of machine-state
 //!   transitions and TD3.
+//! * [`crm`] — counterfactual experiences for reward machines, on TD3.
 //!
-//! CRM and DHRM (the reward-machine methods) are not built yet: the machines and the
-//! off-policy learner they run on are.
+//! DHRM (options per machine edge) is not built yet.
 
+pub mod crm;
+pub mod flat;
 pub mod replay;
 pub mod reward_machine;
 pub mod td3;

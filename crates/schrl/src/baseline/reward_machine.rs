@@ -136,6 +136,11 @@ impl RewardMachine {
         Self::parse(Path::new(&path), text, task)
     }
 
+    /// The text of the shipped machine of the task named `name`, if there is one.
+    pub fn shipped_text(name: &str) -> Option<&'static str> {
+        SHIPPED.iter().find(|(n, _)| *n == name).map(|(_, t)| *t)
+    }
+
     /// A machine file for `task`.
     pub fn from_file(path: &Path, task: &Task) -> Result<Self, MachineError> {
         let text = crate::task::read_text(path, crate::task::MAX_TASK_FILE_BYTES)

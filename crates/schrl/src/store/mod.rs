@@ -31,6 +31,7 @@
 //! racing one save still finds its files.
 
 pub mod controller;
+pub mod crm;
 pub mod joint;
 mod lines;
 mod metrics;
@@ -70,6 +71,8 @@ pub enum RunKind {
     Joint,
     /// `schrl baseline train --algo tltl`: a flat policy trained on a task's robustness.
     Tltl,
+    /// `schrl baseline train --algo crm`: a flat policy trained on a reward machine.
+    Crm,
 }
 
 impl RunKind {
@@ -80,6 +83,7 @@ impl RunKind {
             RunKind::Planner => "planner",
             RunKind::Joint => "joint",
             RunKind::Tltl => "tltl",
+            RunKind::Crm => "crm",
         }
     }
 
@@ -90,6 +94,7 @@ impl RunKind {
             RunKind::Planner => "schrl plan train",
             RunKind::Joint => "schrl train",
             RunKind::Tltl => "schrl baseline train --algo tltl",
+            RunKind::Crm => "schrl baseline train --algo crm",
         }
     }
 }

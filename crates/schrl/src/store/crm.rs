@@ -1,0 +1,196 @@
+//! CRM runs (`schrl baseline train --algo crm`): `crm.safetensors` (actor, critics,
+//! their targets, both Adams' moments, and the replay buffer) and `crm.json`: the
+//! settings, counters, observation statistics, the random stream, the environment's
+//! state, the episode so far and the machine's state. Together they resume a run
+//! exactly.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use candle_core::{DType, Device, Tensor};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::{Checkpoint, RunKind, SaveFiles, StoreError, invalid};
+use crate::baseline::crm::{CrmSettings, CrmTrainer};
+use crate::baseline::replay::ReplayBuffer;
+use crate::baseline::td3::Td3;
+use crate::control::normalize::RunningMeanStd;
+
+const WEIGHTS: &str = "crm.safetensors";
+const STATE: &str = "crm.json";
+/// The layout of `crm.json` this build writes and reads.
+const STATE_FORMAT: u32 = 1;
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct State {
+    format: u32,
+    settings: CrmSettings,
+    td3_updates: u64,
+    actor_adam_t: u64,
+    critic_adam_t: u64,
+    buffer_next: usize,
+    obs_rms: RunningMeanStd,
+    rng: ChaCha8Rng,
+    env_state: String,
+    trajectory: Vec<Vec<f64>>,
+    raw_obs: Vec<f64>,
+    machine_state: usize,
+    episode_return: f64,
+    steps: usize,
+    chunks: usize,
+}
+
+/// The `f32` tensors of the weights file, by name.
+fn floats(t: &CrmTrainer) -> [(&'static str, &[f32]); 12] {
+    let (d, b) = (&t.td3, &t.buffer);
+    [
+        ("actor", &d.actor_params),
+        ("actor.target", &d.actor_target),
+        ("critic", &d.critic_params),
+        ("critic.target", &d.critic_target),
+        ("actor.adam.m", &d.actor_adam.m),
+        ("actor.adam.v", &d.actor_adam.v),
+        ("critic.adam.m", &d.critic_adam.m),
+        ("critic.adam.v", &d.critic_adam.v),
+        ("replay.obs", &b.obs),
+        ("replay.actions", &b.actions),
+        ("replay.rewards", &b.rewards),
+        ("replay.next_obs", &b.next_obs),
+    ]
+}
+
+/// Writes the CRM trainer `t` into a save.
+pub fn save_into(files: &mut SaveFiles, t: &CrmTrainer) -> Result<(), StoreError> {
+    let cpu = &Device::Cpu;
+    let tensors = (|| -> candle_core::Result<HashMap<String, Tensor>> {
+        let mut m = HashMap::new();
+        for (name, v) in floats(t) {
+            m.insert(name.to_string(), Tensor::from_slice(v, v.len(), cpu)?);
+        }
+        let b = &t.buffer;
+        m.insert("replay.states".into(), Tensor::from_slice(&b.states, b.states.len(), cpu)?);
+        m.insert("replay.next_states".into(), Tensor::from_slice(&b.next_states, b.next_states.len(), cpu)?);
+        let dones: Vec<u8> = b.dones.iter().map(|d| u8::from(*d)).collect();
+        m.insert("replay.dones".into(), Tensor::from_slice(&dones, dones.len(), cpu)?);
+        Ok(m)
+    })();
+    files.write_with(WEIGHTS, |p| tensors.and_then(|t| candle_core::safetensors::save(&t, p)))?;
+    let state = State {
+        format: STATE_FORMAT,
+        settings: t.settings.clone(),
+        td3_updates: t.td3.updates,
+        actor_adam_t: t.td3.actor_adam.t,
+        critic_adam_t: t.td3.critic_adam.t,
+        buffer_next: t.buffer.next,
+        obs_rms: t.obs_rms.clone(),
+        rng: t.rng.clone(),
+        env_state: t.env.save_state(),
+        trajectory: t.trajectory.clone(),
+        raw_obs: t.raw_obs.clone(),
+        machine_state: t.state,
+        episode_return: t.episode_return,
+        steps: t.steps,
+        chunks: t.chunks,
+    };
+    files.json(STATE, &state)
+}
+
+/// Restores the CRM trainer checkpointed in `ckpt`.
+pub fn load_from(ckpt: &Checkpoint) -> Result<CrmTrainer, StoreError> {
+    let state: State = ckpt.json(STATE)?;
+    let path = ckpt.path_of(STATE);
+    if state.format != STATE_FORMAT {
+        return Err(invalid(
+            &path,
+            format!("format {} is not {STATE_FORMAT}, the CRM state this schrl reads", state.format),
+        ));
+    }
+    // A fresh trainer gives the shapes every saved tensor must have.
+    let fresh = CrmTrainer::new(state.settings.clone()).map_err(|e| invalid(&path, e.to_string()))?;
+    let weights = ckpt.file(WEIGHTS)?;
+    let tensors = candle_core::safetensors::load(&weights, &Device::Cpu)
+        .map_err(|e| invalid(&weights, e.to_string()))?;
+    let get = |name: &str, dtype: DType| -> Result<Tensor, StoreError> {
+        let t = tensors.get(name).ok_or_else(|| invalid(&weights, format!("no tensor '{name}'")))?;
+        t.to_dtype(dtype).map_err(|e| invalid(&weights, format!("{name}: {e}")))
+    };
+    let f32s = |name: &str, len: Option<usize>| -> Result<Vec<f32>, StoreError> {
+        let v: Vec<f32> =
+            get(name, DType::F32)?.to_vec1().map_err(|e| invalid(&weights, format!("{name}: {e}")))?;
+        if len.is_some_and(|l| l != v.len()) {
+            return Err(invalid(
+                &weights,
+                format!("tensor '{name}' has {} numbers, expected {len:?}", v.len()),
+            ));
+        }
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(invalid(&weights, format!("tensor '{name}' holds a non-finite number")));
+        }
+        Ok(v)
+    };
+    let u32s = |name: &str| -> Result<Vec<u32>, StoreError> {
+        get(name, DType::U32)?.to_vec1().map_err(|e| invalid(&weights, format!("{name}: {e}")))
+    };
+    let d = &fresh.td3;
+    let (na, nc) = (d.actor_params.len(), d.critic_params.len());
+    let mut td3: Td3 = d.clone();
+    td3.actor_params = f32s("actor", Some(na))?;
+    td3.actor_target = f32s("actor.target", Some(na))?;
+    td3.critic_params = f32s("critic", Some(nc))?;
+    td3.critic_target = f32s("critic.target", Some(nc))?;
+    td3.actor_adam.m = f32s("actor.adam.m", Some(na))?;
+    td3.actor_adam.v = f32s("actor.adam.v", Some(na))?;
+    td3.critic_adam.m = f32s("critic.adam.m", Some(nc))?;
+    td3.critic_adam.v = f32s("critic.adam.v", Some(nc))?;
+    td3.actor_adam.t = state.actor_adam_t;
+    td3.critic_adam.t = state.critic_adam_t;
+    td3.updates = state.td3_updates;
+    let mut buffer: ReplayBuffer = fresh.buffer.clone();
+    buffer.obs = f32s("replay.obs", None)?;
+    buffer.actions = f32s("replay.actions", None)?;
+    buffer.rewards = f32s("replay.rewards", None)?;
+    buffer.next_obs = f32s("replay.next_obs", None)?;
+    buffer.states = u32s("replay.states")?;
+    buffer.next_states = u32s("replay.next_states")?;
+    let dones: Vec<u8> = get("replay.dones", DType::U8)?
+        .to_vec1()
+        .map_err(|e| invalid(&weights, format!("replay.dones: {e}")))?;
+    buffer.dones = dones.into_iter().map(|d| d != 0).collect();
+    buffer.next = state.buffer_next;
+    let n = buffer.rewards.len();
+    let (od, ad) = (buffer.obs_dim, buffer.act_dim);
+    let m = fresh.machine.len() as u32;
+    let fits = n <= buffer.capacity
+        && buffer.obs.len() == n * od
+        && buffer.next_obs.len() == n * od
+        && buffer.actions.len() == n * ad
+        && [buffer.states.len(), buffer.next_states.len(), buffer.dones.len()].iter().all(|l| *l == n)
+        && buffer.states.iter().chain(&buffer.next_states).all(|u| *u < m)
+        && buffer.next < buffer.capacity;
+    if !fits {
+        return Err(invalid(
+            &weights,
+            "the replay buffer's tensors do not agree with each other or the task",
+        ));
+    }
+    CrmTrainer::restored(
+        state.settings,
+        td3,
+        buffer,
+        state.obs_rms,
+        state.rng,
+        &state.env_state,
+        state.trajectory,
+        state.raw_obs,
+        (state.machine_state, state.episode_return),
+        (state.steps, state.chunks),
+    )
+    .map_err(|e| invalid(&path, e.to_string()))
+}
+
+/// Loads the CRM run in `dir`.
+pub fn load(dir: &Path) -> Result<CrmTrainer, StoreError> {
+    load_from(&Checkpoint::open(dir, RunKind::Crm)?)
+}
