@@ -99,6 +99,7 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
         }],
         y_range: Some((0.0, 1.0)),
         y_label: y.into(),
+        reference: None,
     };
     let svg = tmp("curve.svg");
     save_chart(&[panel("satisfaction")], "environment steps", &svg, false).unwrap();

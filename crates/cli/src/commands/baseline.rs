@@ -483,11 +483,13 @@ fn save_curve<M: EpisodeStats>(history: &[M], out: &std::path::Path) -> Result<(
             series: vec![series("spec score of training episodes", |w| w.0)],
             y_range: None,
             y_label: "spec score".into(),
+            reference: None,
         },
         ChartPanel {
             series: vec![series("satisfying training episodes", |w| w.1)],
             y_range: Some((0.0, 1.0)),
             y_label: "satisfaction".into(),
+            reference: None,
         },
     ];
     sim::render::save_chart(&panels, "environment steps", out, true)?;

@@ -231,11 +231,13 @@ fn save_curve(history: &[ControlMetrics], out: &Path) -> Result<()> {
             series: vec![series("goals reached (last 100 episodes)", &|m| m.success_rate)],
             y_range: Some((0.0, 1.0)),
             y_label: "success rate".into(),
+            reference: None,
         },
         ChartPanel {
             series: vec![series("mean episode return", &|m| m.mean_return)],
             y_range: None,
             y_label: "return".into(),
+            reference: None,
         },
     ];
     sim::render::save_chart(&panels, "environment steps", out, true)?;

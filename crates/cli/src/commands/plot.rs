@@ -158,8 +158,13 @@ fn bars(args: BarsArgs) -> Result<()> {
     Ok(())
 }
 
-/// One run's spec scores: `(environment steps, score)` in order.
-type Curve = Vec<(f64, f64)>;
+/// One run's spec scores: `(environment steps, score)` in order, and whether the run
+/// may have stopped early at its target (`schrl train`'s runs), so its last value holds
+/// to the end.
+struct Curve {
+    points: Vec<(f64, f64)>,
+    holds: bool,
+}
 
 /// The spec scores of the run in `dir`.
 fn scores(dir: &Path) -> Result<Curve> {
@@ -200,7 +205,7 @@ fn scores(dir: &Path) -> Result<Curve> {
     if out.is_empty() {
         bail!("{}: no spec scores (runs trained before the score was logged have none)", path.display());
     }
-    Ok(out)
+    Ok(Curve { points: out, holds: manifest["kind"] == "joint" })
 }
 
 fn read_json(path: &Path) -> Result<serde_json::Value> {
@@ -209,13 +214,20 @@ fn read_json(path: &Path) -> Result<serde_json::Value> {
 }
 
 /// A run's scores as bin means over `bins` equal bins of `0..=max_x`: a bin with no
-/// iteration keeps the bin before it (a run that stopped early at its target keeps its
-/// last value); bins before the run's first iteration have none.
-fn binned(points: &[(f64, f64)], max_x: f64, bins: usize) -> Vec<Option<f64>> {
+/// iteration keeps the bin before it; bins before the run's first iteration have none,
+/// nor do bins after its last unless the run may have stopped early at its target
+/// ([`Curve::holds`]): a run still training ends where it stands.
+fn binned(curve: &Curve, max_x: f64, bins: usize) -> Vec<Option<f64>> {
+    let points = &curve.points;
+    let end = points.last().map_or(0.0, |p| p.0);
     let mut out = Vec::with_capacity(bins);
     let mut last = None;
-    let mut rest = points;
+    let mut rest = &points[..];
     for k in 1..=bins {
+        if !curve.holds && max_x * (k - 1) as f64 / bins as f64 >= end {
+            out.push(None);
+            continue;
+        }
         let edge = max_x * k as f64 / bins as f64;
         let n = rest.iter().take_while(|(x, _)| *x <= edge).count();
         let (inside, after) = rest.split_at(n);
@@ -245,7 +257,7 @@ fn curves(args: CurvesArgs) -> Result<()> {
         }
     }
     let max_x =
-        cells.iter().flat_map(|(_, r)| r.iter().flat_map(|p| p.last())).map(|p| p.0).fold(0.0, f64::max);
+        cells.iter().flat_map(|(_, r)| r.iter().flat_map(|c| c.points.last())).map(|p| p.0).fold(0.0, f64::max);
     let mut tasks: Vec<String> = vec![];
     for ((task, _), _) in &cells {
         if !tasks.contains(task) {
@@ -255,7 +267,7 @@ fn curves(args: CurvesArgs) -> Result<()> {
     let panels: Vec<ChartPanel> = tasks
         .iter()
         .map(|task| {
-            let mut series: Vec<Series> = cells
+            let series: Vec<Series> = cells
                 .iter()
                 .filter(|((t, _), _)| t == task)
                 .map(|((_, method), runs)| {
@@ -275,12 +287,12 @@ fn curves(args: CurvesArgs) -> Result<()> {
                     Series { label: format!("{method} ({} seeds)", runs.len()), points, band }
                 })
                 .collect();
-            series.push(Series {
-                label: "score 0: satisfied above".into(),
-                points: vec![(0.0, 0.0), (max_x, 0.0)],
-                band: vec![],
-            });
-            ChartPanel { series, y_range: None, y_label: format!("{task}: spec score") }
+            ChartPanel {
+                series,
+                y_range: None,
+                y_label: format!("{task}: spec score (> 0: satisfied)"),
+                reference: Some(0.0),
+            }
         })
         .collect();
     sim::render::save_chart(&panels, "environment steps", &args.out, args.force)?;

@@ -527,16 +527,19 @@ fn save_curve(history: &[JointMetrics], out: &Path) -> Result<()> {
             ],
             y_range: Some((0.0, 1.0)),
             y_label: "satisfaction".into(),
+            reference: None,
         },
         ChartPanel {
             series: vec![series("r_l (−steps/limit; failures below −1)", &|m| m.low_level_reward)],
             y_range: None,
             y_label: "low-level reward".into(),
+            reference: None,
         },
         ChartPanel {
             series: vec![series("λ (Lagrange multiplier of ρ ≥ ε)", &|m| m.lambda)],
             y_range: None,
             y_label: "λ".into(),
+            reference: None,
         },
     ];
     sim::render::save_chart(&panels, "environment steps", out, true)?;

@@ -36,6 +36,9 @@ pub struct ChartPanel {
     pub y_range: Option<(f64, f64)>,
     /// The y axis's title.
     pub y_label: String,
+    /// A dashed black line across the panel at this y, under the series (e.g. 0 for a
+    /// score whose sign is a verdict); `None`: none.
+    pub reference: Option<f64>,
 }
 
 /// Panel size of line charts (px).
@@ -110,6 +113,11 @@ where
             .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
             .map_err(err)?;
         axes(&mut chart, x_label, &panel.y_label).draw().map_err(err)?;
+        if let Some(y) = panel.reference.filter(|y| y.is_finite()) {
+            let line =
+                plotters::element::DashedPathElement::new([(x0, y), (x1, y)], 6, 4, BLACK.stroke_width(1));
+            chart.draw_series(std::iter::once(line)).map_err(err)?;
+        }
         for (i, s) in panel.series.iter().enumerate() {
             let band: Vec<(f64, f64, f64)> = s
                 .band
