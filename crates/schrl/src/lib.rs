@@ -12,8 +12,8 @@
 //! * [`control`] — the goal-conditioned PPO controller (paper §3.3).
 //! * [`run`] — executing plans with a controller: the waypoint dispatcher, joint
 //!   training (paper App. A), evaluation over groups of runs.
-//! * [`baseline`] — the paper's baselines: HTLTL (SCHRL without the Lagrange term) and
-//!   TLTL (a flat PPO policy rewarded by the spec's robustness).
+//! * [`baseline`] — the paper's baselines: HTLTL (SCHRL without the Lagrange term), TLTL
+//!   (a flat PPO policy rewarded by the spec's robustness), CRM (reward machines on TD3).
 //! * [`store`] — run directories: manifest, atomic checkpoints, lock, metrics log.
 
 #![warn(missing_docs)]

@@ -256,8 +256,11 @@ fn curves(args: CurvesArgs) -> Result<()> {
             None => cells.push((key, vec![points])),
         }
     }
-    let max_x =
-        cells.iter().flat_map(|(_, r)| r.iter().flat_map(|c| c.points.last())).map(|p| p.0).fold(0.0, f64::max);
+    let max_x = cells
+        .iter()
+        .flat_map(|(_, r)| r.iter().flat_map(|c| c.points.last()))
+        .map(|p| p.0)
+        .fold(0.0, f64::max);
     let mut tasks: Vec<String> = vec![];
     for ((task, _), _) in &cells {
         if !tasks.contains(task) {
