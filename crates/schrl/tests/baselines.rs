@@ -296,8 +296,10 @@ mod crm {
 
     #[test]
     fn a_resumed_crm_run_continues_exactly_as_one_that_never_stopped() {
-        let td3 = Td3Config { learning_starts: CHUNK - 500, buffer: 10_000, ..Td3Config::default() };
-        let settings = seq_from_g1(td3, 3 * CHUNK);
+        // Learning starts 300 steps before the first chunk ends; the second (last) chunk
+        // is the budget's remaining 600 steps.
+        let td3 = Td3Config { learning_starts: CHUNK - 300, buffer: 10_000, ..Td3Config::default() };
+        let settings = seq_from_g1(td3, CHUNK + 600);
         let dir = std::env::temp_dir().join(format!("schrl-crm-resume-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let mut run = RunWriter::create(&dir, RunKind::Crm, &settings, Existing::Refuse).unwrap();

@@ -207,8 +207,7 @@ impl Td3 {
     /// One critic update and, every `policy_delay`, an actor update and target step.
     pub fn update(&mut self, b: &Batch<'_>, rng: &mut impl Rng) -> Td3Stats {
         let cfg = self.config.clone();
-        let (n, d) = (b.n, self.act_dim());
-        let qn = self.critic.num_params();
+        let (n, qn) = (b.n, self.critic.num_params());
         let mut cache = MlpCache::default();
         // Target: smoothed target action, the smaller target critic.
         let mut a_next = self.actor.forward(&self.actor_target, b.x_next, n, &mut cache).to_vec();
@@ -225,50 +224,13 @@ impl Td3 {
                 b.r[k] + boot
             })
             .collect();
-        // Critics.
-        let xa = self.joined(b.x, b.a, n);
-        let mut grad = vec![0.0f32; 2 * qn];
-        let mut critic_loss = 0.0;
-        for (c, g) in grad.chunks_mut(qn).enumerate() {
-            let params = &self.critic_params[c * qn..(c + 1) * qn];
-            let q = self.critic.forward(params, &xa, n, &mut cache).to_vec();
-            let d_out: Vec<f32> = q.iter().zip(&y).map(|(q, y)| 2.0 * (q - y) / n as f32).collect();
-            critic_loss += q.iter().zip(&y).map(|(q, y)| ((q - y) as f64).powi(2)).sum::<f64>() / n as f64;
-            self.critic.backward(params, &xa, n, &mut cache, &d_out, g);
-        }
+        let (critic_loss, mut grad) = self.critic_gradient(b.x, b.a, &y, n);
         self.critic_adam.step(&mut self.critic_params, &mut grad, cfg.lr as f32, f32::INFINITY);
         self.updates += 1;
         if !self.updates.is_multiple_of(cfg.policy_delay as u64) {
             return Td3Stats { critic_loss, actor_loss: None };
         }
-        // Actor: ascend Q₁(x, tanh(net(x))).
-        let mut actor_cache = MlpCache::default();
-        let z = self.actor.forward(&self.actor_params, b.x, n, &mut actor_cache).to_vec();
-        let a: Vec<f32> = z.iter().map(|z| z.tanh()).collect();
-        let xa = self.joined(b.x, &a, n);
-        let q = self.critic.forward(&self.critic_params[..qn], &xa, n, &mut cache).to_vec();
-        let actor_loss = -q.iter().map(|q| *q as f64).sum::<f64>() / n as f64;
-        let d_q = vec![-1.0 / n as f32; n];
-        let mut unused = vec![0.0f32; qn];
-        let mut d_xa = vec![0.0f32; xa.len()];
-        self.critic.backward_with_input(
-            &self.critic_params[..qn],
-            &xa,
-            n,
-            &mut cache,
-            &d_q,
-            &mut unused,
-            &mut d_xa,
-        );
-        let i = self.input_dim();
-        let d_z: Vec<f32> = (0..n * d)
-            .map(|k| {
-                let (row, j) = (k / d, k % d);
-                d_xa[row * (i + d) + i + j] * (1.0 - a[k] * a[k])
-            })
-            .collect();
-        let mut g = vec![0.0f32; self.actor_params.len()];
-        self.actor.backward(&self.actor_params, b.x, n, &mut actor_cache, &d_z, &mut g);
+        let (actor_loss, mut g) = self.actor_gradient(b.x, n);
         self.actor_adam.step(&mut self.actor_params, &mut g, cfg.lr as f32, f32::INFINITY);
         let tau = cfg.tau as f32;
         for (t, p) in self.actor_target.iter_mut().zip(&self.actor_params) {
@@ -278,6 +240,46 @@ impl Td3 {
             *t = tau * p + (1.0 - tau) * *t;
         }
         Td3Stats { critic_loss, actor_loss: Some(actor_loss) }
+    }
+
+    /// The critics' loss `mean (Q₁ − y)² + mean (Q₂ − y)²` on `n` rows and its gradient
+    /// with respect to `[Q₁ | Q₂]`'s parameters.
+    pub fn critic_gradient(&self, x: &[f32], a: &[f32], y: &[f32], n: usize) -> (f64, Vec<f32>) {
+        let qn = self.critic.num_params();
+        let xa = self.joined(x, a, n);
+        let mut cache = MlpCache::default();
+        let mut grad = vec![0.0f32; 2 * qn];
+        let mut loss = 0.0;
+        for (c, g) in grad.chunks_mut(qn).enumerate() {
+            let params = &self.critic_params[c * qn..(c + 1) * qn];
+            let q = self.critic.forward(params, &xa, n, &mut cache).to_vec();
+            let d_out: Vec<f32> = q.iter().zip(y).map(|(q, y)| 2.0 * (q - y) / n as f32).collect();
+            loss += q.iter().zip(y).map(|(q, y)| ((q - y) as f64).powi(2)).sum::<f64>() / n as f64;
+            self.critic.backward(params, &xa, n, &mut cache, &d_out, g);
+        }
+        (loss, grad)
+    }
+
+    /// The actor's loss `−mean Q₁(x, tanh(net(x)))` on `n` rows and its gradient with
+    /// respect to the actor's parameters (through `∂Q₁/∂a` and the squashing `tanh`).
+    pub fn actor_gradient(&self, x: &[f32], n: usize) -> (f64, Vec<f32>) {
+        let (d, i, qn) = (self.act_dim(), self.input_dim(), self.critic.num_params());
+        let (mut actor_cache, mut cache) = (MlpCache::default(), MlpCache::default());
+        let z = self.actor.forward(&self.actor_params, x, n, &mut actor_cache).to_vec();
+        let a: Vec<f32> = z.iter().map(|z| z.tanh()).collect();
+        let xa = self.joined(x, &a, n);
+        let q = self.critic.forward(&self.critic_params[..qn], &xa, n, &mut cache).to_vec();
+        let loss = -q.iter().map(|q| *q as f64).sum::<f64>() / n as f64;
+        let d_q = vec![-1.0 / n as f32; n];
+        let mut unused = vec![0.0f32; qn];
+        let mut d_xa = vec![0.0f32; xa.len()];
+        let critic = &self.critic_params[..qn];
+        self.critic.backward_with_input(critic, &xa, n, &mut cache, &d_q, &mut unused, &mut d_xa);
+        let d_z: Vec<f32> =
+            (0..n * d).map(|k| d_xa[(k / d) * (i + d) + i + k % d] * (1.0 - a[k] * a[k])).collect();
+        let mut g = vec![0.0f32; self.actor_params.len()];
+        self.actor.backward(&self.actor_params, x, n, &mut actor_cache, &d_z, &mut g);
+        (loss, g)
     }
 
     /// `Q₁(x, a)` for `n` rows (diagnostics and tests).
@@ -293,6 +295,34 @@ mod tests {
     use super::*;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
+
+    /// Both gradients against central differences of their losses, on a small network.
+    #[test]
+    fn the_critic_and_actor_gradients_match_finite_differences() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let cfg = Td3Config { hidden: vec![5, 4], ..Td3Config::default() };
+        let td3 = Td3::new(3, 2, cfg, &mut rng);
+        let n = 4;
+        let mut v = |k: usize| (0..k).map(|_| rng.random_range(-1.0f32..1.0)).collect::<Vec<f32>>();
+        let (x, a, y) = (v(n * 3), v(n * 2), v(n));
+        let check = |analytic: &[f32], loss: &dyn Fn(&Td3) -> f64, set: &dyn Fn(&mut Td3, usize, f32)| {
+            for k in (0..analytic.len()).step_by(7) {
+                let (mut up, mut down) = (td3.clone(), td3.clone());
+                set(&mut up, k, 1e-2);
+                set(&mut down, k, -1e-2);
+                let fd = (loss(&up) - loss(&down)) / 2e-2;
+                assert!(
+                    (fd - analytic[k] as f64).abs() < 2e-3 * (1.0 + fd.abs()),
+                    "parameter {k}: {fd} vs {}",
+                    analytic[k]
+                );
+            }
+        };
+        let (_, g) = td3.critic_gradient(&x, &a, &y, n);
+        check(&g, &|t| t.critic_gradient(&x, &a, &y, n).0, &|t, k, h| t.critic_params[k] += h);
+        let (_, g) = td3.actor_gradient(&x, n);
+        check(&g, &|t| t.actor_gradient(&x, n).0, &|t, k, h| t.actor_params[k] += h);
+    }
 
     /// A one-step problem (every transition ends the episode) whose reward is
     /// `−(a − 0.5)²`: the critic must learn it and the actor move to 0.5.
