@@ -59,6 +59,8 @@ fn tltl_trains_resumes_refuses_to_clobber_evaluates_and_plots() {
 
     let o = train(&["--task", task, "--steps", "4000"]);
     assert!(!o.status.success() && text(&o.stderr).contains("--force"), "{}", text(&o.stderr));
+    let o = train(&["--resume", "--machine", task]);
+    assert!(!o.status.success() && text(&o.stderr).contains("--algo crm"), "{}", text(&o.stderr));
     let o = train(&["--resume", "--seed", "9"]);
     assert!(!o.status.success() && text(&o.stderr).contains("--seed"), "{}", text(&o.stderr));
 

@@ -119,6 +119,12 @@ const FLAT_SAVE_EVERY: usize = 25;
 /// Runs `schrl baseline ...`.
 pub fn run(cmd: Command) -> Result<()> {
     match cmd {
+        Command::Train(args) if args.machine.is_some() && args.algo != Algo::Crm => {
+            bail!(
+                "--machine is a reward machine for --algo crm; {} takes none",
+                format!("{:?}", args.algo).to_lowercase()
+            )
+        }
         Command::Train(args) => match args.algo {
             Algo::Htltl => super::train::train(super::train::TrainArgs::htltl(args.common)),
             Algo::Tltl => train_flat::<TltlTrainer>(&args),
@@ -184,8 +190,8 @@ impl FlatSettings for TltlSettings {
     fn identity(&self) -> (Robot, &str, &str, u64) {
         (self.robot, &self.task_toml, &self.task_spec, self.seed)
     }
-    fn conflicts(&self, args: &TrainArgs) -> Result<Vec<(&'static str, bool)>> {
-        Ok(vec![("--machine", args.machine.is_some())])
+    fn conflicts(&self, _: &TrainArgs) -> Result<Vec<(&'static str, bool)>> {
+        Ok(vec![])
     }
     fn budget(&mut self) -> (&mut usize, &mut usize, &mut usize) {
         (&mut self.steps, &mut self.eval_groups, &mut self.save_every)
