@@ -30,7 +30,11 @@ one() { # method task seed
   esac
   if [[ -f "$dir/manifest.json" ]]; then again=(--resume); else again=(--task "$2" --seed "$3"); fi
   mkdir -p "$(dirname "$dir")"
-  "$bin" "${cmd[@]}" "${again[@]}" --out "$dir" >"$dir.out" 2>"$dir.err"
+  # Only a run that finished gets its result.txt: a stopped one is resumed next time.
+  if ! "$bin" "${cmd[@]}" "${again[@]}" --out "$dir" >"$dir.out" 2>"$dir.err"; then
+    echo "$1 $2 seed $3: stopped or failed (see $dir.err); rerun to resume" >&2
+    return 1
+  fi
   mv "$dir.out" "$dir/result.txt"
   echo "$1 $2 seed $3: $(grep '^satisfaction:' "$dir/result.txt")"
 }
