@@ -214,8 +214,7 @@ pub fn evaluate(
         for ((trajectory, headings), outcome) in trajectories.into_iter().zip(headings).zip(outcome) {
             let outcome = outcome.expect("every episode ended");
             let (path, reached_at) = sampled(&trajectory, &at);
-            let judged = spec.judge(&path, &trajectory, &reached_at);
-            let robustness = spec.score(&path, &trajectory, &reached_at);
+            let judged = spec.judge_stopped(&path, &trajectory, &reached_at);
             let run = Execution {
                 planned: vec![],
                 executed: path,
@@ -225,7 +224,7 @@ pub fn evaluate(
                 outcome,
                 reached_at,
                 control_return: 0.0,
-                robustness,
+                robustness: judged.robustness,
                 entered: judged.entered,
             };
             eval.tally(&mut tally, run, |r| steps_to_reach(&spec, task, &at, r) as f64);

@@ -277,8 +277,19 @@ impl ExecutionSpec {
     /// judged robustness for a run that reached every waypoint; a collided run ends at
     /// the obstacle, where `safe` is negative. `trajectory` must not be empty.
     pub fn score(&self, executed: &[Vec<f64>], trajectory: &[Vec<f64>], reached_at: &[usize]) -> f64 {
+        self.judge_stopped(executed, trajectory, reached_at).robustness
+    }
+
+    /// [`ExecutionSpec::judge`] on the run read as [`ExecutionSpec::score`] reads it: the
+    /// score, and the region whose entry failed it.
+    pub fn judge_stopped(
+        &self,
+        executed: &[Vec<f64>],
+        trajectory: &[Vec<f64>],
+        reached_at: &[usize],
+    ) -> Judged {
         let (Some(last), Some(first)) = (trajectory.last(), executed.first()) else {
-            return f64::NEG_INFINITY;
+            return Judged { robustness: f64::NEG_INFINITY, entered: None };
         };
         let end = trajectory.len() - 1;
         let mut at: Vec<usize> = reached_at.iter().map(|s| (*s).min(end)).take(self.steps).collect();
@@ -286,7 +297,7 @@ impl ExecutionSpec {
         let mut path: Vec<Vec<f64>> =
             std::iter::once(first.clone()).chain(executed.iter().skip(1).take(self.steps).cloned()).collect();
         path.resize(self.steps + 1, last.clone());
-        self.judge(&path, trajectory, &at).robustness
+        self.judge(&path, trajectory, &at)
     }
 
     /// Judges a run: `executed` (the start and the positions where waypoints were
