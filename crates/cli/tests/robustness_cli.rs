@@ -146,3 +146,21 @@ fn inputs_without_end_starts_past_the_end_and_overwriting_the_input_are_refused(
     let spec = format!("@{}", bom.display());
     assert_eq!(last_line(&schrl(&["robustness", "--spec", &spec, "--trace", ok])), "1");
 }
+
+/// The smooth `until` relaxations are chosen in the semantics text; hard has none.
+#[test]
+fn until_relaxation_is_named_and_hard_refuses_one() {
+    let trace = write("u.csv", "x,y\n1,0\n1,0\n1,2\n");
+    let t = trace.to_str().unwrap();
+    let value = |sem: &str| -> f64 {
+        let o = schrl(&["robustness", "--spec", "x > 0 U y > 1", "--trace", t, "--semantics", sem]);
+        assert!(o.status.success(), "{sem}: {}", String::from_utf8_lossy(&o.stderr));
+        last_line(&o).parse().unwrap()
+    };
+    let (rec, flat) = (value("lse:0.5"), value("lse:0.5,until=flat"));
+    assert_eq!(rec, value("lse:0.5,until=recursive"));
+    assert!((rec - flat).abs() > 1e-6, "two relaxations: {rec} {flat}");
+    let o = schrl(&["robustness", "--spec", "x > 0 U y > 1", "--trace", t, "--semantics", "hard,until=flat"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("hard semantics has no until relaxation"));
+}

@@ -503,3 +503,19 @@ fn joint_updates_hold_the_spec_against_a_low_level_reward_that_pulls_off_it() {
     assert!(after >= before - 0.05, "mean-path satisfaction {before} → {after}");
     assert!(drifted < after, "the 8-path update held too ({drifted}): the test no longer tells them apart");
 }
+
+/// Settings saved before the until relaxation was a choice say `soft:10` and meant
+/// the flat relaxation; new ones name it.
+#[test]
+fn saved_semantics_without_an_until_relaxation_read_as_flat() {
+    use stl::{Semantics, UntilSmoothing};
+    let cfg = CpgConfig::default();
+    assert_eq!(cfg.semantics, Semantics::soft(10.0).with_until(UntilSmoothing::Flat));
+    let text = serde_json::to_string(&cfg).unwrap();
+    assert!(text.contains("\"soft:10,until=flat\""), "{text}");
+    let old: CpgConfig = serde_json::from_str(&text.replace("soft:10,until=flat", "soft:10")).unwrap();
+    assert_eq!(old, cfg);
+    let rec = CpgConfig { semantics: Semantics::soft(10.0), ..cfg };
+    let back: CpgConfig = serde_json::from_str(&serde_json::to_string(&rec).unwrap()).unwrap();
+    assert_eq!(back.semantics.until, UntilSmoothing::Recursive);
+}

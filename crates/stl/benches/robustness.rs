@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use criterion::measurement::WallTime;
 use criterion::{BenchmarkGroup, BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use stl::{Ball, Formula, Semantics, Spec, parse};
+use stl::{Ball, Formula, Semantics, Spec, UntilSmoothing, parse};
 
 mod point_tasks;
 use point_tasks::{point_tasks, random_paths};
@@ -50,12 +50,25 @@ fn batch(c: &mut Criterion) {
     g.finish();
 }
 
+fn three_modes() -> [(&'static str, Semantics); 3] {
+    [("hard", Semantics::hard()), ("soft2", Semantics::soft(2.0)), ("lse", Semantics::lse(0.5))]
+}
+
 /// Robustness and gradient of `path` under `spec` in the three modes, named by `steps`.
 fn every_mode(g: &mut BenchmarkGroup<'_, WallTime>, spec: &Spec, path: &[f64], steps: usize) {
+    modes(g, spec, path, steps, &three_modes());
+}
+
+/// Robustness and gradient of `path` under `spec` in each of `modes`.
+fn modes(
+    g: &mut BenchmarkGroup<'_, WallTime>,
+    spec: &Spec,
+    path: &[f64],
+    steps: usize,
+    modes: &[(&str, Semantics)],
+) {
     let mut grad = vec![0.0; path.len()];
-    for (mode, sem) in
-        [("hard", Semantics::hard()), ("soft2", Semantics::soft(2.0)), ("lse", Semantics::lse(0.5))]
-    {
+    for &(mode, sem) in modes {
         let mut ev = spec.evaluator();
         g.bench_function(BenchmarkId::new(mode, steps), |b| {
             b.iter(|| {
@@ -85,17 +98,30 @@ fn path_length(c: &mut Criterion) {
     g.finish();
 }
 
-/// `until` with a 21-step window over growing paths, robustness and gradient: O(T)
-/// in hard mode, O(T·w) in the smooth ones (w = 21 here).
+/// `until` over growing paths, robustness and gradient, with a 21-step window and
+/// unbounded: O(T) in hard mode and with the recursive relaxation (the default),
+/// O(T·w) with the flat one (run unbounded only on the shortest path: quadratic).
 fn until_length(c: &mut Criterion) {
-    let mut g = c.benchmark_group("until_length");
-    let spec = Spec::builder(parse("x > 0 U[0,20] y > 1").unwrap()).signals(["x", "y"]).build().unwrap();
-    for steps in [1_000usize, 10_000, 100_000] {
-        let path = random_paths(1, steps, 7);
-        g.throughput(Throughput::Elements(steps as u64));
-        every_mode(&mut g, &spec, &path, steps);
+    let flat = |sem: Semantics| sem.with_until(UntilSmoothing::Flat);
+    let [hard, soft, lse] = three_modes();
+    let with_flat = [
+        hard,
+        soft,
+        lse,
+        ("soft2-flat", flat(Semantics::soft(2.0))),
+        ("lse-flat", flat(Semantics::lse(0.5))),
+    ];
+    for (group, text) in [("until_length", "x > 0 U[0,20] y > 1"), ("until_unbounded", "x > 0 U y > 1")] {
+        let mut g = c.benchmark_group(group);
+        let spec = Spec::builder(parse(text).unwrap()).signals(["x", "y"]).build().unwrap();
+        for steps in [1_000usize, 10_000, 100_000] {
+            let path = random_paths(1, steps, 7);
+            g.throughput(Throughput::Elements(steps as u64));
+            let quadratic = group == "until_unbounded" && steps > 1_000;
+            modes(&mut g, &spec, &path, steps, &with_flat[..if quadratic { 3 } else { 5 }]);
+        }
+        g.finish();
     }
-    g.finish();
 }
 
 /// Formula size: a conjunction of k reach clauses over 64 steps.

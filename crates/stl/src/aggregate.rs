@@ -10,7 +10,7 @@
 // Index loops mirror the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 
-use crate::semantics::Smoothing;
+use crate::semantics::{Smoothing, UntilSmoothing};
 
 /// Direction of an aggregation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -409,10 +409,18 @@ fn soft_window_accs(beta: f64, x: &[f64], a: usize, b: Option<usize>, sc: &mut S
 //
 // ρ(φ U[a,b] ψ, t) = max_{k ∈ W(t)} min(ψ_k, min_{j ∈ [lo, k−1]} φ_j), W(t) = [lo, hi]
 // the clamped window (paper App. C: ψ at k, φ on [a, k−1] relative to t).
+//
+// Hard mode and the recursive relaxation use the identity
+// ρ = min(max_{k∈W} ψ_k, V(lo)), V(u) = max(ψ_u, min(φ_u, V(u+1))), V(n−1) = ψ_{n−1}:
+// V(lo) may also count some k > hi, but each such term is at most min φ over W, which
+// already bounds the k ∈ W terms, so the outer min removes exactly the excess. With an
+// unbounded window the outer min never binds and is dropped.
 
 /// Forward pass of until, writing `out[t]` for every `t`.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn until_forward(
     smoothing: Smoothing,
+    relax: UntilSmoothing,
     phi: &[f64],
     psi: &[f64],
     a: usize,
@@ -431,6 +439,26 @@ pub(crate) fn until_forward(
             for (t, o) in out.iter_mut().enumerate() {
                 let (lo, _) = window(t, a, b, n);
                 *o = o.min(v[lo]);
+            }
+            sc.terms = v;
+        }
+        _ if relax == UntilSmoothing::Recursive => {
+            let (inner, outer) = (Agg::new(smoothing, Dir::Min), Agg::new(smoothing, Dir::Max));
+            let mut v = std::mem::take(&mut sc.terms);
+            smooth_until_v(inner, outer, phi, psi, &mut v);
+            if b.is_none() {
+                for (t, o) in out.iter_mut().enumerate() {
+                    *o = v[window(t, a, b, n).0];
+                }
+            } else {
+                let mut logw = std::mem::take(&mut sc.vwin);
+                logw.clear();
+                logw.resize(n, 0.0);
+                window_forward(outer, psi, (a, b), out, &mut logw, sc);
+                for (t, o) in out.iter_mut().enumerate() {
+                    *o = pair(inner, *o, v[window(t, a, b, n).0]).0;
+                }
+                sc.vwin = logw;
             }
             sc.terms = v;
         }
@@ -456,6 +484,51 @@ fn until_v(phi: &[f64], psi: &[f64], v: &mut Vec<f64>) {
     }
 }
 
+/// `V(u)` of the recursive relaxation: each `max`/`min` of the hard recursion made a
+/// smooth pair.
+fn smooth_until_v(inner: Agg, outer: Agg, phi: &[f64], psi: &[f64], v: &mut Vec<f64>) {
+    let n = phi.len();
+    v.clear();
+    v.resize(n, 0.0);
+    v[n - 1] = psi[n - 1];
+    for u in (0..n - 1).rev() {
+        v[u] = pair(outer, psi[u], pair(inner, phi[u], v[u + 1]).0).0;
+    }
+}
+
+/// The smooth aggregate of two values and its partial derivatives `(value, ∂/∂x, ∂/∂y)`.
+///
+/// Soft: `w·x + (1−w)·y`, `w = σ(β(x−y))`; log-sum-exp: `ln(e^{βx} + e^{βy})/β`, whose
+/// partials are `σ(β(x−y))` and its complement.
+#[inline]
+fn pair(agg: Agg, x: f64, y: f64) -> (f64, f64, f64) {
+    match agg {
+        Agg::Soft { beta } => {
+            let w = sigmoid(beta * (x - y));
+            // w(1−w) is exactly 0 once σ saturates, so ±top operands stay finite.
+            let c = beta * w * (1.0 - w) * (x - y);
+            (w * x + (1.0 - w) * y, w + c, 1.0 - w - c)
+        }
+        Agg::Lse { beta } => {
+            let (bx, by) = (beta * x, beta * y);
+            let value = (bx.max(by) + (-(bx - by).abs()).exp().ln_1p()) / beta;
+            let w = sigmoid(bx - by);
+            (value, w, 1.0 - w)
+        }
+        Agg::Hard(_) => unreachable!("hard until has its own recursion"),
+    }
+}
+
+#[inline]
+fn sigmoid(z: f64) -> f64 {
+    if z >= 0.0 {
+        1.0 / (1.0 + (-z).exp())
+    } else {
+        let e = z.exp();
+        e / (1.0 + e)
+    }
+}
+
 /// Fills `sc.terms` (and `sc.tacc`) with the inner terms `min(ψ_k, φ_lo..φ_{k−1})`.
 fn soft_until_terms(inner: Agg, phi: &[f64], psi: &[f64], (lo, hi): (usize, usize), sc: &mut Scratch) {
     let beta = match inner {
@@ -477,6 +550,7 @@ fn soft_until_terms(inner: Agg, phi: &[f64], psi: &[f64], (lo, hi): (usize, usiz
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn until_backward(
     smoothing: Smoothing,
+    relax: UntilSmoothing,
     phi: &[f64],
     psi: &[f64],
     a: usize,
@@ -525,6 +599,49 @@ pub(crate) fn until_backward(
             }
             sc.terms = v;
             sc.vwin = fpsi;
+            sc.gterm = gv;
+        }
+        _ if relax == UntilSmoothing::Recursive => {
+            let (inner, outer) = (Agg::new(smoothing, Dir::Min), Agg::new(smoothing, Dir::Max));
+            let mut v = std::mem::take(&mut sc.terms);
+            smooth_until_v(inner, outer, phi, psi, &mut v);
+            let mut gv = std::mem::take(&mut sc.gterm);
+            gv.clear();
+            gv.resize(n, 0.0);
+            if b.is_none() {
+                for t in 0..n {
+                    gv[window(t, a, b, n).0] += gout[t];
+                }
+            } else {
+                // Recompute the window max of ψ, then split each gradient between it
+                // and V(lo) by the outer pair's partials.
+                let (mut fpsi, mut logw, mut gwin) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+                window_forward(outer, psi, (a, b), &mut fpsi, &mut logw, sc);
+                for t in 0..n {
+                    let lo = window(t, a, b, n).0;
+                    let (_, dwin, dv) = pair(inner, fpsi[t], v[lo]);
+                    gwin[t] = gout[t] * dwin;
+                    gv[lo] += gout[t] * dv;
+                }
+                window_backward(outer, psi, (a, b), &fpsi, &logw, &gwin, gpsi, sc);
+            }
+            // V(u) feeds V(u−1) only: one forward sweep carries the gradient down.
+            for u in 0..n {
+                let g = gv[u];
+                if g == 0.0 {
+                    continue;
+                }
+                if u == n - 1 {
+                    gpsi[u] += g;
+                    continue;
+                }
+                let (m, dphi, dnext) = pair(inner, phi[u], v[u + 1]);
+                let (_, dpsi, dm) = pair(outer, psi[u], m);
+                gpsi[u] += g * dpsi;
+                gphi[u] += g * dm * dphi;
+                gv[u + 1] += g * dm * dnext;
+            }
+            sc.terms = v;
             sc.gterm = gv;
         }
         _ => {

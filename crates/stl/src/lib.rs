@@ -13,7 +13,7 @@
 //!   signals; computes `ρ(path)` at any start time and `∂ρ/∂path`.
 //! * [`Semantics`] — hard `min`/`max` (exact subgradients), the paper's softmax-weighted
 //!   soft mode, or log-sum-exp with a temperature; optionally smoothing only the
-//!   Boolean connectives.
+//!   Boolean connectives; a smooth `until` relaxed recursively in O(T) or as written.
 //! * [`tensor`] (feature `candle`) — robustness of a batch of paths as one candle
 //!   operation, differentiable into the paths and into neural predicates.
 //!
@@ -50,6 +50,6 @@ pub mod tensor;
 pub use formula::{CmpOp, Formula, Interval};
 pub use predicate::{AfterStep, AvoidBoxes, AxisBox, Ball, FnPredicate, Halfspace, Predicate};
 pub use program::{Atom, Program, UntilRule, Workspace};
-pub use semantics::{Semantics, SemanticsError, Smoothing};
+pub use semantics::{Semantics, SemanticsError, Smoothing, UntilSmoothing};
 pub use spec::{EvalError, Evaluator, Spec, SpecBuilder, SpecError};
 pub use syntax::{ParseError, is_valid_name, locate_name, parse};

@@ -4,7 +4,8 @@
 //! of `T` steps give a `T × P` matrix of values, and a [`Program`] maps that matrix
 //! to the robustness signal `ρ(t)` for every start time `t`, and back to `∂ρ/∂values`.
 //! Every node is evaluated for all `T` steps in O(T) (windows included), so one
-//! evaluation costs O(T · nodes) whatever the interval lengths (soft `until` is the
+//! evaluation costs O(T · nodes) whatever the interval lengths (a smooth `until`
+//! relaxed as written, [`UntilSmoothing::Flat`](crate::UntilSmoothing::Flat), is the
 //! exception: O(T · w) for a window of `w` steps).
 //!
 //! # Finite paths
@@ -279,6 +280,7 @@ impl Program {
                 Op::Until(iv, l, r) => {
                     aggregate::until_forward(
                         temporal,
+                        sem.until,
                         sig(*l),
                         sig(*r),
                         iv.start,
@@ -362,6 +364,7 @@ impl Program {
                     let x = sig(*l);
                     aggregate::until_backward(
                         temporal,
+                        sem.until,
                         x,
                         x,
                         iv.start,
@@ -381,6 +384,7 @@ impl Program {
                     let (gl, gr) = two_mut(adj_done, *l, *r, n);
                     aggregate::until_backward(
                         temporal,
+                        sem.until,
                         sig(*l),
                         sig(*r),
                         iv.start,

@@ -5,7 +5,9 @@
 //! `Σ softmax(α·v)·v` (they used α = 2). We add the log-sum-exp smoothing with a
 //! temperature τ (`max ≈ τ·log Σ exp(v/τ)`), common in the smooth-STL literature.
 //! Smooth modes apply to `∧`, `∨`, `⇒` and, unless [`Semantics::logic_only`] is
-//! asked for, also to the temporal operators.
+//! asked for, also to the temporal operators. How a smooth `until` is relaxed is a
+//! choice of its own ([`UntilSmoothing`]): the two relaxations agree in hard mode and
+//! differ in cost and in how closely they follow it.
 
 use std::fmt;
 use std::str::FromStr;
@@ -33,6 +35,36 @@ pub enum Smoothing {
     },
 }
 
+/// How the smooth modes relax `φ U[a,b] ψ`, whose hard robustness is
+/// `max_{k ∈ W} min(ψ_k, min_{j ∈ [lo, k−1]} φ_j)` over the window `W = [lo, hi]`.
+/// In hard mode both are that value exactly (and share one O(T) evaluation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum UntilSmoothing {
+    /// Smooths the hard identity `min(max_{k∈W} ψ_k, V(lo))` with the recursion
+    /// `V(u) = max(ψ_u, min(φ_u, V(u+1)))`, `V(T−1) = ψ_{T−1}`, one smooth pair at a
+    /// time; an unbounded window is `V(lo)` alone (the outer `min` is exact there).
+    /// O(T) whatever the window. Nesting compounds the smoothing: a value can sit up
+    /// to one pair's smoothing error per step away from hard (LSE: `2·τ·ln 2` per
+    /// step), where [`UntilSmoothing::Flat`] is one aggregate deep.
+    #[default]
+    Recursive,
+    /// Smooths the definition as written: an inner smooth `min` per `k` and one outer
+    /// smooth `max`. O(T·w) for a window of `w` steps, quadratic when the window is
+    /// the whole path. The planner's training semantics (its defaults were tuned on
+    /// it; its windows are at most 17 steps).
+    Flat,
+}
+
+impl UntilSmoothing {
+    /// The name used in semantics text (`until=flat`).
+    pub fn name(self) -> &'static str {
+        match self {
+            UntilSmoothing::Recursive => "recursive",
+            UntilSmoothing::Flat => "flat",
+        }
+    }
+}
+
 /// The complete choice of semantics for an evaluation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Semantics {
@@ -41,6 +73,8 @@ pub struct Semantics {
     /// Whether the temporal operators (eventually, globally, until) are smoothed too.
     /// `false` smooths only the Boolean connectives, as the authors' code did.
     pub smooth_temporal: bool,
+    /// How a smooth `until` is relaxed (irrelevant in hard mode).
+    pub until: UntilSmoothing,
     /// The robustness `k > 0` of `true` (App. C); `false` is `−k`.
     pub top: f64,
 }
@@ -52,7 +86,12 @@ pub const DEFAULT_TOP: f64 = 1.0e9;
 impl Semantics {
     /// Exact min/max semantics.
     pub fn hard() -> Self {
-        Self { smoothing: Smoothing::Hard, smooth_temporal: true, top: DEFAULT_TOP }
+        Self {
+            smoothing: Smoothing::Hard,
+            smooth_temporal: true,
+            until: UntilSmoothing::Recursive,
+            top: DEFAULT_TOP,
+        }
     }
 
     /// The paper's soft semantics with sharpness `alpha` (authors used 2).
@@ -68,6 +107,12 @@ impl Semantics {
     /// Smooth only `∧`, `∨`, `⇒`; temporal operators stay hard.
     pub fn logic_only(mut self) -> Self {
         self.smooth_temporal = false;
+        self
+    }
+
+    /// Relaxes a smooth `until` by `until` (default [`UntilSmoothing::Recursive`]).
+    pub fn with_until(mut self, until: UntilSmoothing) -> Self {
+        self.until = until;
         self
     }
 
@@ -113,8 +158,14 @@ impl Default for Semantics {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SemanticsError {
     /// The text is not one of the accepted forms.
-    #[error("unknown semantics '{0}': expected 'hard', 'soft:<alpha>' or 'lse:<temperature>'")]
+    #[error(
+        "unknown semantics '{0}': expected 'hard', 'soft:<alpha>' or 'lse:<temperature>', \
+         the smooth ones optionally followed by ',until=recursive' or ',until=flat'"
+    )]
     Unknown(String),
+    /// An until relaxation was given to hard semantics, which has none.
+    #[error("'{0}': hard semantics has no until relaxation to choose (drop ',until=…')")]
+    UntilOnHard(String),
     /// A parameter is zero, negative, or not finite.
     #[error("{what} must be a finite number > 0, got {value}")]
     NotPositive {
@@ -128,11 +179,25 @@ pub enum SemanticsError {
 impl FromStr for Semantics {
     type Err = SemanticsError;
 
-    /// Parses `hard`, `soft:<alpha>` or `lse:<temperature>`.
+    /// Parses `hard`, `soft:<alpha>` or `lse:<temperature>`; a smooth one may add
+    /// `,until=recursive` (the default) or `,until=flat`.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let unknown = || SemanticsError::Unknown(s.to_string());
-        let t = s.trim();
+        let (t, until) = match s.trim().split_once(',') {
+            None => (s.trim(), None),
+            Some((mode, option)) => {
+                let until = match option.trim().strip_prefix("until=").map(str::trim) {
+                    Some("recursive") => UntilSmoothing::Recursive,
+                    Some("flat") => UntilSmoothing::Flat,
+                    _ => return Err(unknown()),
+                };
+                (mode.trim(), Some(until))
+            }
+        };
         let sem = if t == "hard" {
+            if until.is_some() {
+                return Err(SemanticsError::UntilOnHard(s.to_string()));
+            }
             Self::hard()
         } else if let Some(rest) = t.strip_prefix("soft:") {
             Self::soft(rest.trim().parse().map_err(|_| unknown())?)
@@ -142,16 +207,21 @@ impl FromStr for Semantics {
             return Err(unknown());
         };
         sem.validate()?;
-        Ok(sem)
+        Ok(sem.with_until(until.unwrap_or_default()))
     }
 }
 
 impl fmt::Display for Semantics {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self.smoothing {
-            Smoothing::Hard => write!(f, "hard"),
-            Smoothing::Soft { alpha } => write!(f, "soft:{alpha}"),
-            Smoothing::LogSumExp { temperature } => write!(f, "lse:{temperature}"),
+            // Both relaxations are the hard value exactly: nothing to say.
+            Smoothing::Hard => return write!(f, "hard"),
+            Smoothing::Soft { alpha } => write!(f, "soft:{alpha}")?,
+            Smoothing::LogSumExp { temperature } => write!(f, "lse:{temperature}")?,
+        }
+        match self.until {
+            UntilSmoothing::Recursive => Ok(()),
+            UntilSmoothing::Flat => write!(f, ",until=flat"),
         }
     }
 }

@@ -5,7 +5,7 @@ mod common;
 
 use common::{bind, formula, path, semantics};
 use proptest::prelude::*;
-use stl::{Formula, Semantics, UntilRule, parse};
+use stl::{Formula, Semantics, UntilRule, UntilSmoothing, parse};
 
 fn close(a: f64, b: f64, tol: f64) -> bool {
     (a - b).abs() <= tol * (1.0 + a.abs().max(b.abs()))
@@ -51,9 +51,10 @@ proptest! {
         let spec = bind(f.clone());
         let hard = spec.robustness(&p, &Semantics::hard()).unwrap();
         // Soft max of n values is within n/(e·α) of the max; LSE within τ·ln n; errors
-        // add up at most once per node.
+        // add up at most once per node, and the recursive until's once per pair (two
+        // per step of the path).
         let n = (p.len() / 2).max(4) as f64;
-        let size = f.size() as f64;
+        let size = f.size() as f64 + 2.0 * n;
         for alpha in [1e3, 1e5] {
             let soft = spec.robustness(&p, &Semantics::soft(alpha)).unwrap();
             prop_assert!((soft - hard).abs() <= size * n / alpha, "α={alpha}: {soft} vs {hard}");
@@ -194,4 +195,47 @@ fn logic_only_smoothing_keeps_temporal_operators_hard() {
     let s = Semantics::soft(1.0).logic_only();
     assert_eq!(spec.robustness(&p, &s).unwrap(), 3.0);
     assert!(spec.robustness(&p, &Semantics::soft(1.0)).unwrap() < 3.0);
+}
+
+/// Regression: the smooth `until` was quadratic (`x>0 U y>2.999` at lse:0.5 took 10 s
+/// on 3·10^4 rows). The recursive relaxation visits each step a bounded number of
+/// times; on a long path it must agree with its own definition (small paths, the
+/// property tests) and, at a low temperature, with hard mode.
+#[test]
+fn recursive_until_is_linear_and_close_to_hard_on_a_long_path() {
+    let n = 30_000;
+    let x: Vec<f64> = (0..n).map(|i| ((i * 7919) % 101) as f64 / 50.0 - 0.9).collect();
+    let path: Vec<f64> =
+        x.iter().enumerate().flat_map(|(i, &v)| [v, if i == 5 { 3.0 } else { 0.0 }]).collect();
+    let spec = bind(parse("x > -1 U y > 2.999").unwrap());
+    let hard = spec.robustness(&path, &Semantics::hard()).unwrap();
+    let lse = spec.robustness(&path, &Semantics::lse(1e-3)).unwrap();
+    assert!((hard - 0.001).abs() < 1e-9, "{hard}");
+    // One pair's error per step at most: 2·τ·ln 2 · n bounds it loosely.
+    assert!((lse - hard).abs() < 2.0 * 1e-3 * 2f64.ln() * n as f64, "{lse} vs {hard}");
+    let (_, grad) = spec.gradient(&path, &Semantics::soft(2.0)).unwrap();
+    assert!(grad.iter().all(|g| g.is_finite()));
+    // The reaching step's y carries the gradient in both modes.
+    assert!(grad[2 * 5 + 1] > 0.0);
+}
+
+#[test]
+fn the_two_until_relaxations_are_named_in_text_and_agree_in_hard_mode() {
+    let flat: Semantics = "soft:2,until=flat".parse().unwrap();
+    assert_eq!(flat, Semantics::soft(2.0).with_until(UntilSmoothing::Flat));
+    assert_eq!(flat.to_string(), "soft:2,until=flat");
+    let rec: Semantics = "lse:0.5, until=recursive".parse().unwrap();
+    assert_eq!(rec, Semantics::lse(0.5));
+    assert_eq!(rec.to_string(), "lse:0.5");
+    assert!("hard,until=flat".parse::<Semantics>().unwrap_err().to_string().contains("hard semantics"));
+    assert!("soft:2,until=lazy".parse::<Semantics>().unwrap_err().to_string().contains("until=flat"));
+    let spec = bind(parse("x > 0 U[1,3] x > 5").unwrap());
+    let x = xs(&[-1.0, 2.0, 3.0, 7.0, 1.0]);
+    let a = spec.gradient(&x, &Semantics::hard()).unwrap();
+    let b = spec.gradient(&x, &Semantics::hard().with_until(UntilSmoothing::Flat)).unwrap();
+    assert_eq!(a, b);
+    // Smooth, they differ: two relaxations of one value.
+    let r = spec.robustness(&x, &Semantics::soft(2.0)).unwrap();
+    let f = spec.robustness(&x, &flat).unwrap();
+    assert!((r - f).abs() > 1e-6, "{r} {f}");
 }

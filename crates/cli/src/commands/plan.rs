@@ -216,8 +216,8 @@ pub struct TrainArgs {
     /// cpg (constrained policy gradient) or pg (policy gradient only) [default: cpg].
     #[arg(long, value_parser = parse_method)]
     method: Option<Method>,
-    /// Semantics of the spec in the loss: hard, soft:<alpha> or lse:<temperature>
-    /// [default: soft:10].
+    /// Semantics of the spec in the loss: hard, soft:<alpha> or lse:<temperature>, a
+    /// smooth one with ,until=flat|recursive [default: soft:10,until=flat].
     #[arg(long)]
     semantics: Option<Semantics>,
     /// Seed of parameters, starts and noise [default: 0].

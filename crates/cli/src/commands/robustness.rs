@@ -30,7 +30,8 @@ pub struct Args {
     #[arg(long, requires = "task")]
     runs: Option<PathBuf>,
     /// Semantics: hard, soft:<alpha> (the paper's softmax-weighted mean) or
-    /// lse:<temperature> (log-sum-exp).
+    /// lse:<temperature> (log-sum-exp); a smooth one may add ,until=recursive (the
+    /// default, O(T)) or ,until=flat (the definition smoothed as written, O(T·w)).
     #[arg(long, default_value = "hard")]
     semantics: Semantics,
     /// Smooth only and/or/implies; keep eventually/globally/until hard.

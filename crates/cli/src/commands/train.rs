@@ -49,7 +49,8 @@ pub struct TrainArgs {
     #[arg(long)]
     controller: Option<PathBuf>,
     /// Semantics of the spec in the planner's loss: hard, soft:<alpha> or
-    /// lse:<temperature> [default: soft:10].
+    /// lse:<temperature>, a smooth one with ,until=flat|recursive
+    /// [default: soft:10,until=flat].
     #[arg(long)]
     semantics: Option<Semantics>,
     /// Planner network: gru-ode (the paper's), or the ablations gru and mlp [default: gru-ode].

@@ -22,8 +22,8 @@ use candle_nn::{VarBuilder, VarMap};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use stl::Semantics;
 use stl::tensor::TensorSpec;
+use stl::{Semantics, UntilSmoothing};
 
 use crate::nn::adam::Adam;
 use crate::plan::gru_ode_backprop::{GruOdeBackprop, Source, Tape};
@@ -154,7 +154,9 @@ pub struct CpgConfig {
     /// Semantics of ρ in the loss: the authors' soft STL, sharper than their α = 2
     /// (α = 10): segment clearances are tenths of a metre and α = 2 averages them
     /// away (Point Seq, 2000 updates: 8 % of sampled plans satisfied at α = 2, 60 %
-    /// at α = 10).
+    /// at α = 10). `until` relaxed as written ([`UntilSmoothing::Flat`]): with the
+    /// recursive relaxation Point Signal seed 0 trained to satisfaction 0.000
+    /// (1.000 flat); its windows are ≤ 17 steps, so the quadratic cost is nothing.
     #[serde(with = "semantics_text")]
     pub semantics: Semantics,
     /// Objective.
@@ -184,7 +186,7 @@ impl Default for CpgConfig {
             epsilon: 0.05,
             lambda_lr: 0.05,
             lambda_init: 1.0,
-            semantics: Semantics::soft(10.0),
+            semantics: Semantics::soft(10.0).with_until(UntilSmoothing::Flat),
             method: Method::Cpg,
             seed: 0,
             planner: PlannerKind::GruOde,
@@ -294,18 +296,27 @@ fn vars_by_name(varmap: &VarMap) -> Vec<candle_core::Var> {
     named.into_iter().map(|(_, v)| v.clone()).collect()
 }
 
-/// Semantics as their command-line text (`soft:10`) in settings files.
+/// Semantics as their command-line text (`soft:10,until=flat`) in settings files.
+///
+/// Settings saved before the until relaxation was a choice say `soft:10` and meant
+/// the flat one (the only one then); a smooth text without `until=` is read so, and
+/// every smooth text is written with it.
 mod semantics_text {
     use serde::{Deserialize, Deserializer, Serializer};
-    use stl::Semantics;
+    use stl::{Semantics, Smoothing, UntilSmoothing};
 
     pub fn serialize<S: Serializer>(s: &Semantics, out: S) -> Result<S::Ok, S::Error> {
-        out.serialize_str(&s.to_string())
+        match (s.smoothing, s.until) {
+            (Smoothing::Hard, _) | (_, UntilSmoothing::Flat) => out.serialize_str(&s.to_string()),
+            (_, UntilSmoothing::Recursive) => out.serialize_str(&format!("{s},until=recursive")),
+        }
     }
 
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Semantics, D::Error> {
         let text = String::deserialize(d)?;
-        text.parse().map_err(|e| serde::de::Error::custom(format!("semantics '{text}': {e}")))
+        let sem: Semantics =
+            text.parse().map_err(|e| serde::de::Error::custom(format!("semantics '{text}': {e}")))?;
+        Ok(if text.contains("until=") { sem } else { sem.with_until(UntilSmoothing::Flat) })
     }
 }
 

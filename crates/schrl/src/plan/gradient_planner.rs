@@ -14,6 +14,7 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use stl::{EvalError, Semantics, Spec};
 
+use crate::plan::cpg::CpgConfig;
 use crate::task::Task;
 
 /// Settings of the gradient planner.
@@ -31,7 +32,7 @@ pub struct GradientPlannerConfig {
 
 impl Default for GradientPlannerConfig {
     fn default() -> Self {
-        Self { lr: 0.1, iterations: 200, restarts: 50, semantics: Semantics::soft(10.0) }
+        Self { lr: 0.1, iterations: 200, restarts: 50, semantics: CpgConfig::default().semantics }
     }
 }
 

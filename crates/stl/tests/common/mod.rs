@@ -4,7 +4,7 @@
 #![allow(dead_code)]
 
 use proptest::prelude::*;
-use stl::{Ball, Formula, Halfspace, Interval, Semantics, Smoothing, Spec, UntilRule};
+use stl::{Ball, Formula, Halfspace, Interval, Semantics, Smoothing, Spec, UntilRule, UntilSmoothing};
 
 pub const SIGNALS: [&str; 2] = ["x", "y"];
 
@@ -71,6 +71,8 @@ pub fn semantics() -> impl Strategy<Value = Semantics> {
         Just(Semantics::hard()),
         (0.5f64..4.0).prop_map(Semantics::soft),
         (0.2f64..2.0).prop_map(Semantics::lse),
+        (0.5f64..4.0).prop_map(|a| Semantics::soft(a).with_until(UntilSmoothing::Flat)),
+        (0.2f64..2.0).prop_map(|t| Semantics::lse(t).with_until(UntilSmoothing::Flat)),
         (0.5f64..4.0).prop_map(|a| Semantics::soft(a).logic_only()),
         (0.2f64..2.0).prop_map(|t| Semantics::lse(t).logic_only()),
     ]
@@ -156,14 +158,30 @@ pub fn reference_with(f: &Formula, path: &[f64], t: usize, sem: &Semantics, rule
         Formula::Until(i, l, r) => {
             let w = window(i);
             let lo = *w.start();
-            let terms: Vec<f64> = w
-                .map(|k| {
-                    let mut inner = vec![reference(r, path, k, sem)];
-                    inner.extend((lo..k).map(|j| reference(l, path, j, sem)));
-                    agg(temporal, false, &inner)
-                })
-                .collect();
-            let paper = agg(temporal, true, &terms);
+            let paper = if temporal != Smoothing::Hard && sem.until == UntilSmoothing::Recursive {
+                // V(u) = max(ψ_u, min(φ_u, V(u+1))) from the last step down to lo.
+                let mut v = reference(r, path, last, sem);
+                for u in (lo..last).rev() {
+                    let m = agg(temporal, false, &[reference(l, path, u, sem), v]);
+                    v = agg(temporal, true, &[reference(r, path, u, sem), m]);
+                }
+                match i.end {
+                    None => v,
+                    Some(_) => {
+                        let psi: Vec<f64> = w.map(|k| reference(r, path, k, sem)).collect();
+                        agg(temporal, false, &[agg(temporal, true, &psi), v])
+                    }
+                }
+            } else {
+                let terms: Vec<f64> = w
+                    .map(|k| {
+                        let mut inner = vec![reference(r, path, k, sem)];
+                        inner.extend((lo..k).map(|j| reference(l, path, j, sem)));
+                        agg(temporal, false, &inner)
+                    })
+                    .collect();
+                agg(temporal, true, &terms)
+            };
             if rule == UntilRule::Paper || i.start == 0 {
                 return paper;
             }
