@@ -60,7 +60,7 @@ fn tltl_trains_resumes_refuses_to_clobber_evaluates_and_plots() {
     let o = train(&["--task", task, "--steps", "4000"]);
     assert!(!o.status.success() && text(&o.stderr).contains("--force"), "{}", text(&o.stderr));
     let o = train(&["--resume", "--machine", task]);
-    assert!(!o.status.success() && text(&o.stderr).contains("--algo crm"), "{}", text(&o.stderr));
+    assert!(!o.status.success() && text(&o.stderr).contains("--algo crm or dhrm"), "{}", text(&o.stderr));
     let o = train(&["--resume", "--seed", "9"]);
     assert!(!o.status.success() && text(&o.stderr).contains("--seed"), "{}", text(&o.stderr));
 
@@ -127,6 +127,31 @@ fn crm_trains_with_a_machine_file_resumes_and_evaluates() {
     assert!(o.status.success(), "{}", text(&o.stderr));
     assert_eq!(std::fs::read_to_string(run.join("metrics.jsonl")).unwrap().lines().count(), 2);
     let o = schrl(&["baseline", "eval", "--ckpt", out, "--groups", "1", "--per-group", "10"]);
+    assert!(o.status.success() && text(&o.stdout).contains("satisfaction: "), "{}", text(&o.stderr));
+    // A CRM run does not resume as DHRM.
+    let o = schrl(&["baseline", "train", "--algo", "dhrm", "--out", out, "--resume"]);
+    assert!(!o.status.success() && text(&o.stderr).contains("--algo"), "{}", text(&o.stderr));
+    // DHRM trains on the same machine, and evaluates the same way.
+    let dhrm = dir.join("dhrm");
+    let dhrm = dhrm.to_str().unwrap();
+    let o = schrl(&[
+        "baseline",
+        "train",
+        "--algo",
+        "dhrm",
+        "--task",
+        task,
+        "--machine",
+        &machine,
+        "--steps",
+        "4000",
+        "--eval-groups",
+        "0",
+        "--out",
+        dhrm,
+    ]);
+    assert!(o.status.success() && text(&o.stdout).contains("trained dhrm"), "{}", text(&o.stderr));
+    let o = schrl(&["baseline", "eval", "--ckpt", dhrm, "--groups", "1", "--per-group", "10"]);
     assert!(o.status.success() && text(&o.stdout).contains("satisfaction: "), "{}", text(&o.stderr));
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -8,6 +8,7 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use schrl::baseline::crm::{CHUNK, CrmSettings, CrmTrainer};
+use schrl::baseline::dhrm::DhrmConfig;
 use schrl::baseline::reward_machine::RewardMachine;
 use schrl::baseline::td3::{Batch, Td3, Td3Config};
 use schrl::baseline::tltl::{TltlSettings, TltlTrainer};
@@ -55,8 +56,21 @@ fn td3_update(c: &mut Criterion) {
 }
 
 fn crm(c: &mut Criterion) {
+    let mut g = c.benchmark_group("crm_train_chunk");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(CHUNK as u64));
+    for (name, dhrm) in [("point_seq", None), ("point_seq_dhrm", Some(DhrmConfig::default()))] {
+        let mut t = seq_trainer(dhrm);
+        t.train_chunk().unwrap();
+        g.bench_function(name, |b| b.iter(|| t.train_chunk().unwrap()));
+    }
+    g.finish();
+}
+
+/// CRM (or DHRM) on Point Seq, past its learning start after one chunk.
+fn seq_trainer(dhrm: Option<DhrmConfig>) -> CrmTrainer {
     let seq = Task::point(TaskKind::Seq);
-    let mut t = CrmTrainer::new(CrmSettings {
+    CrmTrainer::new(CrmSettings {
         robot: Robot::Point,
         task_toml: seq.toml.clone(),
         task_spec: seq.spec.clone(),
@@ -66,14 +80,9 @@ fn crm(c: &mut Criterion) {
         td3: Td3Config { learning_starts: 1000, ..Td3Config::default() },
         eval_groups: 0,
         save_every: 1,
+        dhrm,
     })
-    .unwrap();
-    t.train_chunk().unwrap();
-    let mut g = c.benchmark_group("crm_train_chunk");
-    g.sample_size(10);
-    g.throughput(Throughput::Elements(CHUNK as u64));
-    g.bench_function("point_seq", |b| b.iter(|| t.train_chunk().unwrap()));
-    g.finish();
+    .unwrap()
 }
 
 criterion_group!(benches, tltl, td3_update, crm);

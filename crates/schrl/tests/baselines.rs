@@ -208,7 +208,10 @@ mod reward_machines {
         let (seen, total) = run(&m, &[&["l0"], &["l0"], &["l3"], &["l0"]]);
         assert_eq!(seen, ["at_l0", "at_l0", "at_l3", "at_l0"]);
         assert_eq!(total, 3.0);
-        assert!(m.options().contains(&(m.initial, 1)), "edges that leave a state are options");
+        let (start, fail) = (m.initial, m.states.iter().position(|s| s == "fail").unwrap());
+        let options = m.options();
+        assert_eq!(options.iter().filter(|(from, _)| *from == start).count(), 4, "one per corner");
+        assert!(options.iter().all(|(_, to)| *to != fail), "a collision is not an option");
     }
 
     #[test]
@@ -241,6 +244,7 @@ mod reward_machines {
 
 mod crm {
     use schrl::baseline::crm::{CHUNK, CrmSettings, CrmTrainer};
+    use schrl::baseline::dhrm::DhrmConfig;
     use schrl::baseline::reward_machine::RewardMachine;
     use schrl::baseline::td3::Td3Config;
     use schrl::store::{self, Existing, RunKind, RunWriter};
@@ -265,6 +269,7 @@ mod crm {
             td3,
             eval_groups: 0,
             save_every: 1,
+            dhrm: None,
         }
     }
 
@@ -317,5 +322,66 @@ mod crm {
         assert_eq!(straight.buffer, resumed.buffer);
         assert_eq!((straight.state, &straight.raw_obs), (resumed.state, &resumed.raw_obs));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn dhrm_adds_one_experience_per_option_and_follows_an_option_of_the_current_state() {
+        let settings =
+            CrmSettings { dhrm: Some(DhrmConfig::default()), ..seq_from_g1(Td3Config::default(), 1) };
+        let mut t = CrmTrainer::new(settings).unwrap();
+        let h = t.hierarchy.as_ref().unwrap();
+        let name = |u: usize| t.machine.states[u].clone();
+        let edges: Vec<(String, String)> = h.options.iter().map(|(a, b)| (name(*a), name(*b))).collect();
+        let want = [("u0", "u1"), ("u1", "u2"), ("u2", "u3"), ("u3", "done")];
+        assert_eq!(edges, want.map(|(a, b)| (a.to_string(), b.to_string())), "collisions are not options");
+        assert_eq!(h.options[h.current.option].0, t.machine.initial);
+        t.train_chunk().unwrap();
+        let b = &t.buffer;
+        assert_eq!(b.len(), 4, "one experience per option");
+        assert_eq!(b.states, [0, 1, 2, 3]);
+        assert_eq!(b.next_states, b.states, "an option's experience stays with it");
+        // In g1 on the first step: option u1 → u2 reaches its target and ends.
+        assert_eq!(b.rewards, [0.0, 1.0, 0.0, 0.0]);
+        assert_eq!(b.dones, [false, true, false, false]);
+        let h = t.hierarchy.as_ref().unwrap();
+        assert_eq!((h.current.steps, h.buffer.len()), (1, 0), "the option still runs: the machine is in u0");
+    }
+
+    #[test]
+    fn a_resumed_dhrm_run_continues_exactly_as_one_that_never_stopped() {
+        let td3 = Td3Config { learning_starts: CHUNK - 300, buffer: 10_000, ..Td3Config::default() };
+        // A meta batch of one: the meta-controller learns from the first option run on.
+        let dhrm = DhrmConfig { batch: 1, target_every: 50, ..DhrmConfig::default() };
+        let settings = CrmSettings { dhrm: Some(dhrm), ..seq_from_g1(td3, CHUNK + 600) };
+        let dir = std::env::temp_dir().join(format!("schrl-dhrm-resume-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut run = RunWriter::create(&dir, RunKind::Crm, &settings, Existing::Refuse).unwrap();
+        let mut straight = CrmTrainer::new(settings.clone()).unwrap();
+        let mut stopped = CrmTrainer::new(settings).unwrap();
+        straight.train_chunk().unwrap();
+        let first = stopped.train_chunk().unwrap();
+        assert!(first.meta_loss.is_some(), "the meta-controller learned within the first chunk");
+        run.save(|f| store::crm::save_into(f, &stopped)).unwrap();
+        drop((run, stopped));
+        let mut resumed = store::crm::load(&dir).unwrap();
+        let (a, b) = (straight.train_chunk().unwrap(), resumed.train_chunk().unwrap());
+        assert_eq!((a.critic_loss, a.meta_loss, &a.episodes), (b.critic_loss, b.meta_loss, &b.episodes));
+        assert_eq!(straight.td3.actor_params, resumed.td3.actor_params);
+        let (hs, hr) = (straight.hierarchy.as_ref().unwrap(), resumed.hierarchy.as_ref().unwrap());
+        assert_eq!((&hs.q_params, &hs.q_target, &hs.buffer), (&hr.q_params, &hr.q_target, &hr.buffer));
+        assert_eq!(hs.current, hr.current);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn dhrm_refuses_a_machine_with_a_live_state_it_cannot_leave() {
+        let mut settings =
+            CrmSettings { dhrm: Some(DhrmConfig::default()), ..seq_from_g1(Td3Config::default(), 1) };
+        // u3 → done pays nothing: u3 is live with no option.
+        settings.machine = settings
+            .machine
+            .replace("to = \"done\"\non = \"g3\"\nreward = 1.0", "to = \"done\"\non = \"g3\"\nreward = 0.0");
+        let err = CrmTrainer::new(settings).err().expect("refused").to_string();
+        assert!(err.contains("'u3'") && err.contains("no option"), "{err}");
     }
 }

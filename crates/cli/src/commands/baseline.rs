@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use schrl::baseline::crm::{CrmMetrics, CrmSettings, CrmTrainer};
+use schrl::baseline::dhrm::DhrmConfig;
 use schrl::baseline::flat::{self, EpisodeSummary, MeanPolicy};
 use schrl::baseline::reward_machine::RewardMachine;
 use schrl::baseline::td3::Td3Config;
@@ -42,6 +43,9 @@ pub enum Algo {
     Htltl,
     /// Counterfactual reward machines on TD3 (Icarte et al. 2022).
     Crm,
+    /// Hierarchical RL over a reward machine: an option per progress edge (TD3) under
+    /// a DQN meta-controller (Icarte et al. 2022).
+    Dhrm,
 }
 
 /// The flags every baseline takes.
@@ -57,7 +61,7 @@ pub struct CommonArgs {
     /// Seed of everything [default: 0].
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Environment steps [default: 4000000 for tltl and crm, SCHRL's 1 M of the general
+    /// Environment steps [default: 4000000 for tltl, crm and dhrm, SCHRL's 1 M of the general
     /// controller and 3 M of joint training; htltl: SCHRL's].
     #[arg(long)]
     pub steps: Option<usize>,
@@ -66,7 +70,7 @@ pub struct CommonArgs {
     /// Evaluation groups of 100 runs after training; 0: none [default: 5].
     #[arg(long, value_parser = super::count::<0, 100>)]
     pub eval_groups: Option<usize>,
-    /// Updates (tltl), iterations (htltl) or 4000-step chunks (crm) between checkpoints
+    /// Updates (tltl), iterations (htltl) or 4000-step chunks (crm, dhrm) between checkpoints
     /// [default: 25 / 50 / 25].
     #[arg(long)]
     pub save_every: Option<usize>,
@@ -80,7 +84,7 @@ pub struct TrainArgs {
     algo: Algo,
     #[command(flatten)]
     common: CommonArgs,
-    /// The reward machine (crm): a machine file [default: the task's shipped machine,
+    /// The reward machine (crm, dhrm): a machine file [default: the task's shipped machine,
     /// tasks/machines/<task>.toml].
     #[arg(long)]
     machine: Option<PathBuf>,
@@ -119,16 +123,16 @@ const FLAT_SAVE_EVERY: usize = 25;
 /// Runs `schrl baseline ...`.
 pub fn run(cmd: Command) -> Result<()> {
     match cmd {
-        Command::Train(args) if args.machine.is_some() && args.algo != Algo::Crm => {
+        Command::Train(args) if args.machine.is_some() && !matches!(args.algo, Algo::Crm | Algo::Dhrm) => {
             bail!(
-                "--machine is a reward machine for --algo crm; {} takes none",
+                "--machine is a reward machine for --algo crm or dhrm; {} takes none",
                 format!("{:?}", args.algo).to_lowercase()
             )
         }
         Command::Train(args) => match args.algo {
             Algo::Htltl => super::train::train(super::train::TrainArgs::htltl(args.common)),
             Algo::Tltl => train_flat::<TltlTrainer>(&args),
-            Algo::Crm => train_flat::<CrmTrainer>(&args),
+            Algo::Crm | Algo::Dhrm => train_flat::<CrmTrainer>(&args),
         },
         Command::Eval(args) => eval(args),
     }
@@ -212,6 +216,7 @@ impl FlatSettings for CrmSettings {
             td3: Td3Config::default(),
             eval_groups: c.eval_groups.unwrap_or(EVAL_GROUPS),
             save_every: c.save_every.unwrap_or(FLAT_SAVE_EVERY),
+            dhrm: (args.algo == Algo::Dhrm).then(DhrmConfig::default),
         })
     }
     fn identity(&self) -> (Robot, &str, &str, u64) {
@@ -226,7 +231,7 @@ impl FlatSettings for CrmSettings {
                 machine_text(Some(path), &task)? != self.machine
             }
         };
-        Ok(vec![("--machine", differs)])
+        Ok(vec![("--machine", differs), ("--algo", self.dhrm.is_some() != (args.algo == Algo::Dhrm))])
     }
     fn budget(&mut self) -> (&mut usize, &mut usize, &mut usize) {
         (&mut self.steps, &mut self.eval_groups, &mut self.save_every)
@@ -439,7 +444,7 @@ fn train_flat<B: FlatBaseline>(args: &TrainArgs) -> Result<()> {
     let task = trainer.task().clone();
     println!(
         "trained {} on {} {} for {} environment steps in {:.1} s; run in {}",
-        B::KIND.name(),
+        format!("{:?}", args.algo).to_lowercase(),
         task.robot,
         task.name,
         trainer.env_steps(),

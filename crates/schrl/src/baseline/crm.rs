@@ -13,6 +13,10 @@
 //! reads positions at fixed steps: the machine rewards the order of events, not their
 //! timing, so a run the machine accepts can still miss the spec's timing. Both are
 //! logged: `score` / `satisfaction` (the spec), `machine_return` (the machine).
+//!
+//! With [`CrmSettings::dhrm`] set the same trainer runs DHRM ([`super::dhrm`]): the
+//! actor is conditioned on the option instead of the machine state, the experiences
+//! are one per option, and a meta-controller picks the options.
 
 use std::time::Instant;
 
@@ -22,6 +26,7 @@ use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 use sim::{Env, Robot};
 
+use super::dhrm::{DhrmConfig, Hierarchy, push_input};
 use super::flat::{
     Ended, EpisodeSummary, FlatDriver, begin, episode_score, flat_obs_dim, observe, sample_steps,
 };
@@ -57,6 +62,9 @@ pub struct CrmSettings {
     pub eval_groups: usize,
     /// Logged chunks ([`CHUNK`] steps each) between checkpoints.
     pub save_every: usize,
+    /// DHRM's options and meta-controller; `None`: CRM.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dhrm: Option<DhrmConfig>,
 }
 
 impl CrmSettings {
@@ -88,6 +96,9 @@ pub struct CrmMetrics {
     pub critic_loss: Option<f64>,
     /// Mean TD3 actor loss over the chunk's actor updates.
     pub actor_loss: Option<f64>,
+    /// DHRM: mean loss of the meta-controller's updates.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub meta_loss: Option<f64>,
     /// Environment steps (with their updates) per second.
     pub steps_per_sec: f64,
 }
@@ -122,16 +133,10 @@ pub struct CrmTrainer {
     pub steps: usize,
     /// Chunks logged.
     pub chunks: usize,
+    /// DHRM's options and meta-controller (`None`: CRM).
+    pub hierarchy: Option<Hierarchy>,
     spec: ExecutionSpec,
     at: Vec<usize>,
-}
-
-/// Standardised `raw` ⊕ the one-hot of machine state `u` of `m` states, appended to `out`.
-fn push_input(rms: &RunningMeanStd, raw: &[f64], u: usize, states: usize, out: &mut Vec<f32>) {
-    let at = out.len();
-    out.resize(at + raw.len(), 0.0);
-    rms.normalize_into(raw, &mut out[at..]);
-    out.extend((0..states).map(|k| f32::from(u8::from(k == u))));
 }
 
 /// An action in `[−1, 1]` scaled to the box `[low, high]`.
@@ -147,6 +152,7 @@ struct Tally {
     returns: Vec<f64>,
     critic: Vec<f64>,
     actor: Vec<f64>,
+    meta: Vec<f64>,
 }
 
 fn mean(xs: &[f64]) -> Option<f64> {
@@ -171,10 +177,18 @@ impl CrmTrainer {
         let mut env = task_env(task.robot, &task)?;
         let od = flat_obs_dim(env.observation_space().dim(), task.map.dim());
         let ad = env.action_space().dim();
-        let td3 = Td3::new(od + machine.len(), ad, settings.td3.clone(), &mut rng);
+        let hierarchy = match &settings.dhrm {
+            Some(cfg) => Some(
+                Hierarchy::new(cfg.clone(), &machine, od, &mut rng)
+                    .map_err(|message| RunError::Setting { key: "dhrm", message })?,
+            ),
+            None => None,
+        };
+        let contexts = hierarchy.as_ref().map_or(machine.len(), Hierarchy::len);
+        let td3 = Td3::new(od + contexts, ad, settings.td3.clone(), &mut rng);
         let mut raw_obs = vec![0.0; od];
         let trajectory = vec![begin(env.as_mut(), &task, &mut rng, &mut raw_obs)?];
-        Ok(Self {
+        let mut t = Self {
             buffer: ReplayBuffer::new(settings.td3.buffer, od, ad),
             obs_rms: RunningMeanStd::new(od),
             spec: task.execution_spec(),
@@ -190,8 +204,29 @@ impl CrmTrainer {
             episode_return: 0.0,
             steps: 0,
             chunks: 0,
+            hierarchy,
             settings,
-        })
+        };
+        t.begin_option();
+        Ok(t)
+    }
+
+    /// The actor's conditioning: the option followed (DHRM) or the machine state (CRM).
+    fn context(&self) -> (usize, usize) {
+        match &self.hierarchy {
+            Some(h) => (h.current.option, h.len()),
+            None => (self.state, self.machine.len()),
+        }
+    }
+
+    /// DHRM: the meta-controller picks an option for the machine's state (ε-greedy).
+    fn begin_option(&mut self) {
+        if let Some(h) = self.hierarchy.as_mut() {
+            let eps = h.epsilon(self.steps, self.settings.steps);
+            let state = (self.state, self.machine.len());
+            let o = h.choose(&self.obs_rms, &self.raw_obs, state, eps, &mut self.rng);
+            h.begin(o, &self.raw_obs, self.state);
+        }
     }
 
     /// `true` once the step budget is spent.
@@ -215,6 +250,7 @@ impl CrmTrainer {
             machine_return: mean(&tally.returns),
             critic_loss: mean(&tally.critic),
             actor_loss: mean(&tally.actor),
+            meta_loss: mean(&tally.meta),
             steps_per_sec: n as f64 / start.elapsed().as_secs_f64().max(1e-9),
         })
     }
@@ -226,7 +262,8 @@ impl CrmTrainer {
             (0..ad).map(|_| self.rng.random_range(-1.0..1.0)).collect()
         } else {
             let mut x = Vec::with_capacity(self.td3.input_dim());
-            push_input(&self.obs_rms, &self.raw_obs, self.state, m, &mut x);
+            let (k, of) = self.context();
+            push_input(&self.obs_rms, &self.raw_obs, k, of, &mut x);
             let mean = self.td3.act(&x, 1, &mut MlpCache::default());
             mean.iter()
                 .map(|a| {
@@ -246,34 +283,68 @@ impl CrmTrainer {
         let index = self.env.steps() as f64 * self.task.steps as f64 / horizon.max(1) as f64;
         let labels = Labels::of(&self.task, self.env.position(), s.collided, index);
         let env_end = s.terminated() || self.env.steps() >= horizon;
-        // Counterfactual experiences: the step as seen from every live machine state.
-        for u in (0..m).filter(|u| !self.machine.terminal[*u]) {
-            let (next, reward) = self.machine.step(u, &labels);
-            self.buffer.push(&Transition {
-                obs: &before,
-                state: u,
-                action: &action,
-                reward,
-                next_obs: &self.raw_obs,
-                next_state: next,
-                done: env_end || self.machine.terminal[next],
-            });
+        if let Some(h) = &self.hierarchy {
+            // DHRM: the step as experienced by every option.
+            for o in 0..h.len() {
+                let (reward, ends) = h.outcome(o, &self.machine, &labels);
+                self.buffer.push(&Transition {
+                    obs: &before,
+                    state: o,
+                    action: &action,
+                    reward,
+                    next_obs: &self.raw_obs,
+                    next_state: o,
+                    done: env_end || ends,
+                });
+            }
+        } else {
+            // Counterfactual experiences: the step as seen from every live machine state.
+            for u in (0..m).filter(|u| !self.machine.terminal[*u]) {
+                let (next, reward) = self.machine.step(u, &labels);
+                self.buffer.push(&Transition {
+                    obs: &before,
+                    state: u,
+                    action: &action,
+                    reward,
+                    next_obs: &self.raw_obs,
+                    next_state: next,
+                    done: env_end || self.machine.terminal[next],
+                });
+            }
         }
         let (next, reward) = self.machine.step(self.state, &labels);
+        let moved = next != self.state;
         self.state = next;
         self.episode_return += reward;
-        if env_end || self.machine.terminal[next] {
+        let ended = env_end || self.machine.terminal[next];
+        if let Some(h) = self.hierarchy.as_mut() {
+            h.record(reward, cfg.gamma);
+            if moved || ended {
+                h.end(&self.raw_obs, next, ended);
+                if !ended {
+                    self.begin_option();
+                }
+            }
+        }
+        if ended {
             let score = episode_score(&self.spec, &self.at, &self.trajectory);
             tally.ended.push(score, s.terminated());
             tally.returns.push(self.episode_return);
             self.trajectory = vec![begin(self.env.as_mut(), &self.task, &mut self.rng, &mut self.raw_obs)?];
             self.state = self.machine.initial;
             self.episode_return = 0.0;
+            self.begin_option();
         }
         if self.steps >= cfg.learning_starts && self.buffer.len() >= cfg.batch {
             let stats = self.update(cfg.batch);
             tally.critic.push(stats.critic_loss);
             tally.actor.extend(stats.actor_loss);
+        }
+        if let Some(h) = self.hierarchy.as_mut()
+            && self.steps >= cfg.learning_starts
+            && h.buffer.len() >= h.config.batch
+        {
+            tally.meta.push(h.update(&self.obs_rms, &self.machine, cfg.gamma, &mut self.rng));
         }
         Ok(())
     }
@@ -281,7 +352,7 @@ impl CrmTrainer {
     /// One TD3 update on a minibatch from the replay buffer.
     fn update(&mut self, n: usize) -> super::td3::Td3Stats {
         let idx = self.buffer.sample(n, &mut self.rng);
-        let (b, od, ad, m) = (&self.buffer, self.buffer.obs_dim, self.buffer.act_dim, self.machine.len());
+        let (b, od, ad, m) = (&self.buffer, self.buffer.obs_dim, self.buffer.act_dim, self.context().1);
         let (mut x, mut x_next) = (Vec::with_capacity(n * (od + m)), Vec::with_capacity(n * (od + m)));
         let (mut a, mut r, mut done) =
             (Vec::with_capacity(n * ad), Vec::with_capacity(n), Vec::with_capacity(n));
@@ -300,7 +371,7 @@ impl CrmTrainer {
 
     /// The deployable policy: the actor's mean actions, tracking the machine's state.
     pub fn policy(&self) -> CrmPolicy<'_> {
-        CrmPolicy { trainer: self, states: vec![], cache: MlpCache::default() }
+        CrmPolicy { trainer: self, states: vec![], options: vec![], cache: MlpCache::default() }
     }
 
     /// Rebuilds a run from saved parts ([`crate::store::crm`]).
@@ -316,9 +387,24 @@ impl CrmTrainer {
         raw_obs: Vec<f64>,
         (state, episode_return): (usize, f64),
         (steps, chunks): (usize, usize),
+        hierarchy: Option<Hierarchy>,
     ) -> Result<Self, RunError> {
         let mut t = Self::new(settings)?;
         let bad = |message: String| RunError::Setting { key: "state", message };
+        let fits = match (&hierarchy, &t.hierarchy) {
+            (Some(h), Some(f)) => {
+                h.q_params.len() == f.q_params.len()
+                    && h.options == f.options
+                    && h.current.option < h.len()
+                    && h.current.start_state < t.machine.len()
+                    && h.current.start_obs.len() == t.raw_obs.len()
+            }
+            (None, None) => true,
+            _ => false,
+        };
+        if !fits {
+            return Err(bad("the saved meta-controller does not fit the settings' DHRM and machine".into()));
+        }
         if td3.input_dim() != t.td3.input_dim() || td3.act_dim() != t.td3.act_dim() {
             return Err(bad("the saved networks do not fit the task's observation and machine".into()));
         }
@@ -339,29 +425,42 @@ impl CrmTrainer {
         t.episode_return = episode_return;
         t.steps = steps;
         t.chunks = chunks;
+        t.hierarchy = hierarchy;
         Ok(t)
     }
 }
 
-/// A trained CRM policy acting in [`super::flat::evaluate`]: mean actions of the actor
-/// on the flat observation ⊕ each episode's machine state.
+/// A trained CRM (or DHRM) policy acting in [`super::flat::evaluate`]: mean actions of
+/// the actor on the flat observation ⊕ each episode's machine state (DHRM: the option
+/// the meta-controller picks greedily on entering each machine state).
 pub struct CrmPolicy<'a> {
     trainer: &'a CrmTrainer,
     states: Vec<usize>,
+    /// DHRM: each episode's option; `None` until picked in its current state.
+    options: Vec<Option<usize>>,
     cache: MlpCache,
 }
 
 impl FlatDriver for CrmPolicy<'_> {
     fn begin(&mut self, n: usize) {
         self.states = vec![self.trainer.machine.initial; n];
+        self.options = vec![None; n];
     }
 
     fn act(&mut self, raw: &[f64], n: usize, actions: &mut [f64]) {
         let t = self.trainer;
         let od = raw.len() / n.max(1);
+        let m = t.machine.len();
         let mut x = Vec::with_capacity(n * t.td3.input_dim());
         for (i, row) in raw.chunks(od).enumerate() {
-            push_input(&t.obs_rms, row, self.states[i], t.machine.len(), &mut x);
+            match &t.hierarchy {
+                Some(h) => {
+                    let o = *self.options[i]
+                        .get_or_insert_with(|| h.greedy(&t.obs_rms, row, (self.states[i], m)));
+                    push_input(&t.obs_rms, row, o, h.len(), &mut x);
+                }
+                None => push_input(&t.obs_rms, row, self.states[i], m, &mut x),
+            }
         }
         let a: Vec<f64> = t.td3.act(&x, n, &mut self.cache).iter().map(|a| *a as f64).collect();
         let ad = t.td3.act_dim();
@@ -372,7 +471,11 @@ impl FlatDriver for CrmPolicy<'_> {
 
     fn after_step(&mut self, i: usize, labels: &Labels) -> bool {
         let m = &self.trainer.machine;
-        self.states[i] = m.step(self.states[i], labels).0;
-        m.terminal[self.states[i]]
+        let next = m.step(self.states[i], labels).0;
+        if next != self.states[i] {
+            self.options[i] = None;
+        }
+        self.states[i] = next;
+        m.terminal[next]
     }
 }

@@ -13,10 +13,11 @@
 //! * [`replay`] and [`td3`] — the off-policy pieces: a replay buffer of machine-state
 //!   transitions and TD3.
 //! * [`crm`] — counterfactual experiences for reward machines, on TD3.
-//!
-//! DHRM (options per machine edge) is not built yet.
+//! * [`dhrm`] — options per progress edge of the machine under a DQN meta-controller,
+//!   run by CRM's trainer.
 
 pub mod crm;
+pub mod dhrm;
 pub mod flat;
 pub mod replay;
 pub mod reward_machine;

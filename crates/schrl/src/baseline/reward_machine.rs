@@ -223,9 +223,10 @@ impl RewardMachine {
             .map_or((u, 0.0), |e| (e.to, e.reward))
     }
 
-    /// The edges that leave their state (DHRM's options): `(from, to)`, in file order.
+    /// The edges that leave their state with a positive reward (DHRM's options):
+    /// `(from, to)`, in file order.
     pub fn options(&self) -> Vec<(usize, usize)> {
-        self.edges.iter().filter(|e| e.from != e.to).map(|e| (e.from, e.to)).collect()
+        self.edges.iter().filter(|e| e.from != e.to && e.reward > 0.0).map(|e| (e.from, e.to)).collect()
     }
 
     /// The state's one-hot encoding, written into `out` (length [`RewardMachine::len`]).

@@ -144,7 +144,7 @@ pub struct Td3 {
 
 /// PyTorch's default initialisation of a linear layer: weights and biases uniform in
 /// `±1/√fan_in`.
-fn init(mlp: &TanhMlp, rng: &mut impl Rng) -> Vec<f32> {
+pub(crate) fn init_linear(mlp: &TanhMlp, rng: &mut impl Rng) -> Vec<f32> {
     let mut p = vec![0.0f32; mlp.num_params()];
     for l in 0..mlp.num_layers() {
         let bound = 1.0 / (mlp.sizes()[l] as f32).sqrt();
@@ -162,8 +162,8 @@ impl Td3 {
         let sizes = |i: usize, o: usize| [vec![i], config.hidden.clone(), vec![o]].concat();
         let actor = TanhMlp::new(&sizes(input, act));
         let critic = TanhMlp::new(&sizes(input + act, 1));
-        let actor_params = init(&actor, rng);
-        let critic_params = [init(&critic, rng), init(&critic, rng)].concat();
+        let actor_params = init_linear(&actor, rng);
+        let critic_params = [init_linear(&critic, rng), init_linear(&critic, rng)].concat();
         Self {
             actor_adam: Adam::new(actor_params.len()),
             critic_adam: Adam::new(critic_params.len()),

@@ -1,8 +1,9 @@
-//! CRM runs (`schrl baseline train --algo crm`): `crm.safetensors` (actor, critics,
-//! their targets, both Adams' moments, and the replay buffer) and `crm.json`: the
-//! settings, counters, observation statistics, the random stream, the environment's
-//! state, the episode so far and the machine's state. Together they resume a run
-//! exactly.
+//! CRM and DHRM runs (`schrl baseline train --algo crm|dhrm`): `crm.safetensors`
+//! (actor, critics, their targets, both Adams' moments, and the replay buffer; DHRM
+//! adds the meta-controller's Q-network, its target, Adam moments and replay) and
+//! `crm.json`: the settings, counters, observation statistics, the random stream, the
+//! environment's state, the episode so far, the machine's state (DHRM: and the option
+//! being run). Together they resume a run exactly.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -13,6 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{Checkpoint, RunKind, SaveFiles, StoreError, invalid};
 use crate::baseline::crm::{CrmSettings, CrmTrainer};
+use crate::baseline::dhrm::OptionRun;
 use crate::baseline::replay::ReplayBuffer;
 use crate::baseline::td3::Td3;
 use crate::control::normalize::RunningMeanStd;
@@ -40,11 +42,42 @@ struct State {
     episode_return: f64,
     steps: usize,
     chunks: usize,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    meta: Option<MetaState>,
 }
 
-/// The `f32` tensors of the weights file, by name.
-fn floats(t: &CrmTrainer) -> [(&'static str, &[f32]); 12] {
-    let (d, b) = (&t.td3, &t.buffer);
+/// DHRM's counters and the option being run.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MetaState {
+    updates: u64,
+    adam_t: u64,
+    buffer_next: usize,
+    current: OptionRun,
+}
+
+/// The replay buffer `b`'s tensors, named `<prefix>.obs` and so on.
+fn buffer_tensors(
+    prefix: &str,
+    b: &ReplayBuffer,
+    m: &mut HashMap<String, Tensor>,
+) -> candle_core::Result<()> {
+    let cpu = &Device::Cpu;
+    for (name, v) in
+        [("obs", &b.obs), ("actions", &b.actions), ("rewards", &b.rewards), ("next_obs", &b.next_obs)]
+    {
+        m.insert(format!("{prefix}.{name}"), Tensor::from_slice(v, v.len(), cpu)?);
+    }
+    m.insert(format!("{prefix}.states"), Tensor::from_slice(&b.states, b.states.len(), cpu)?);
+    m.insert(format!("{prefix}.next_states"), Tensor::from_slice(&b.next_states, b.next_states.len(), cpu)?);
+    let dones: Vec<u8> = b.dones.iter().map(|d| u8::from(*d)).collect();
+    m.insert(format!("{prefix}.dones"), Tensor::from_slice(&dones, dones.len(), cpu)?);
+    Ok(())
+}
+
+/// The networks' `f32` tensors of the weights file, by name.
+fn floats(t: &CrmTrainer) -> [(&'static str, &[f32]); 8] {
+    let d = &t.td3;
     [
         ("actor", &d.actor_params),
         ("actor.target", &d.actor_target),
@@ -54,10 +87,6 @@ fn floats(t: &CrmTrainer) -> [(&'static str, &[f32]); 12] {
         ("actor.adam.v", &d.actor_adam.v),
         ("critic.adam.m", &d.critic_adam.m),
         ("critic.adam.v", &d.critic_adam.v),
-        ("replay.obs", &b.obs),
-        ("replay.actions", &b.actions),
-        ("replay.rewards", &b.rewards),
-        ("replay.next_obs", &b.next_obs),
     ]
 }
 
@@ -69,11 +98,18 @@ pub fn save_into(files: &mut SaveFiles, t: &CrmTrainer) -> Result<(), StoreError
         for (name, v) in floats(t) {
             m.insert(name.to_string(), Tensor::from_slice(v, v.len(), cpu)?);
         }
-        let b = &t.buffer;
-        m.insert("replay.states".into(), Tensor::from_slice(&b.states, b.states.len(), cpu)?);
-        m.insert("replay.next_states".into(), Tensor::from_slice(&b.next_states, b.next_states.len(), cpu)?);
-        let dones: Vec<u8> = b.dones.iter().map(|d| u8::from(*d)).collect();
-        m.insert("replay.dones".into(), Tensor::from_slice(&dones, dones.len(), cpu)?);
+        buffer_tensors("replay", &t.buffer, &mut m)?;
+        if let Some(h) = &t.hierarchy {
+            for (name, v) in [
+                ("meta.q", &h.q_params),
+                ("meta.q.target", &h.q_target),
+                ("meta.adam.m", &h.adam.m),
+                ("meta.adam.v", &h.adam.v),
+            ] {
+                m.insert(name.to_string(), Tensor::from_slice(v, v.len(), cpu)?);
+            }
+            buffer_tensors("meta.replay", &h.buffer, &mut m)?;
+        }
         Ok(m)
     })();
     files.write_with(WEIGHTS, |p| tensors.and_then(|t| candle_core::safetensors::save(&t, p)))?;
@@ -93,6 +129,12 @@ pub fn save_into(files: &mut SaveFiles, t: &CrmTrainer) -> Result<(), StoreError
         episode_return: t.episode_return,
         steps: t.steps,
         chunks: t.chunks,
+        meta: t.hierarchy.as_ref().map(|h| MetaState {
+            updates: h.updates,
+            adam_t: h.adam.t,
+            buffer_next: h.buffer.next,
+            current: h.current.clone(),
+        }),
     };
     files.json(STATE, &state)
 }
@@ -147,34 +189,59 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<CrmTrainer, StoreError> {
     td3.actor_adam.t = state.actor_adam_t;
     td3.critic_adam.t = state.critic_adam_t;
     td3.updates = state.td3_updates;
-    let mut buffer: ReplayBuffer = fresh.buffer.clone();
-    buffer.obs = f32s("replay.obs", None)?;
-    buffer.actions = f32s("replay.actions", None)?;
-    buffer.rewards = f32s("replay.rewards", None)?;
-    buffer.next_obs = f32s("replay.next_obs", None)?;
-    buffer.states = u32s("replay.states")?;
-    buffer.next_states = u32s("replay.next_states")?;
-    let dones: Vec<u8> = get("replay.dones", DType::U8)?
-        .to_vec1()
-        .map_err(|e| invalid(&weights, format!("replay.dones: {e}")))?;
-    buffer.dones = dones.into_iter().map(|d| d != 0).collect();
-    buffer.next = state.buffer_next;
-    let n = buffer.rewards.len();
-    let (od, ad) = (buffer.obs_dim, buffer.act_dim);
-    let m = fresh.machine.len() as u32;
-    let fits = n <= buffer.capacity
-        && buffer.obs.len() == n * od
-        && buffer.next_obs.len() == n * od
-        && buffer.actions.len() == n * ad
-        && [buffer.states.len(), buffer.next_states.len(), buffer.dones.len()].iter().all(|l| *l == n)
-        && buffer.states.iter().chain(&buffer.next_states).all(|u| *u < m)
-        && buffer.next < buffer.capacity;
-    if !fits {
-        return Err(invalid(
-            &weights,
-            "the replay buffer's tensors do not agree with each other or the task",
-        ));
-    }
+    // Every buffer's tensors must agree with each other and index only `contexts`.
+    let load_buffer = |prefix: &str, fresh: &ReplayBuffer, next: usize, contexts: usize| {
+        let mut buffer = fresh.clone();
+        buffer.obs = f32s(&format!("{prefix}.obs"), None)?;
+        buffer.actions = f32s(&format!("{prefix}.actions"), None)?;
+        buffer.rewards = f32s(&format!("{prefix}.rewards"), None)?;
+        buffer.next_obs = f32s(&format!("{prefix}.next_obs"), None)?;
+        buffer.states = u32s(&format!("{prefix}.states"))?;
+        buffer.next_states = u32s(&format!("{prefix}.next_states"))?;
+        let dones: Vec<u8> = get(&format!("{prefix}.dones"), DType::U8)?
+            .to_vec1()
+            .map_err(|e| invalid(&weights, format!("{prefix}.dones: {e}")))?;
+        buffer.dones = dones.into_iter().map(|d| d != 0).collect();
+        buffer.next = next;
+        let n = buffer.rewards.len();
+        let (od, ad) = (buffer.obs_dim, buffer.act_dim);
+        let fits = n <= buffer.capacity
+            && buffer.obs.len() == n * od
+            && buffer.next_obs.len() == n * od
+            && buffer.actions.len() == n * ad
+            && [buffer.states.len(), buffer.next_states.len(), buffer.dones.len()].iter().all(|l| *l == n)
+            && buffer.states.iter().chain(&buffer.next_states).all(|u| (*u as usize) < contexts)
+            && buffer.next < buffer.capacity;
+        if !fits {
+            return Err(invalid(
+                &weights,
+                format!("the {prefix} buffer's tensors do not agree with each other or the task"),
+            ));
+        }
+        Ok(buffer)
+    };
+    let m = fresh.machine.len();
+    let contexts = fresh.hierarchy.as_ref().map_or(m, |h| h.len());
+    let buffer = load_buffer("replay", &fresh.buffer, state.buffer_next, contexts)?;
+    let hierarchy = match (fresh.hierarchy.clone(), state.meta) {
+        (None, None) => None,
+        (Some(mut h), Some(meta)) => {
+            let nq = h.q_params.len();
+            h.q_params = f32s("meta.q", Some(nq))?;
+            h.q_target = f32s("meta.q.target", Some(nq))?;
+            h.adam.m = f32s("meta.adam.m", Some(nq))?;
+            h.adam.v = f32s("meta.adam.v", Some(nq))?;
+            h.adam.t = meta.adam_t;
+            h.updates = meta.updates;
+            h.buffer = load_buffer("meta.replay", &h.buffer, meta.buffer_next, m)?;
+            if h.buffer.actions.chunks(2).any(|a| a[0] as usize >= h.len()) {
+                return Err(invalid(&weights, "the meta replay names an option the machine does not have"));
+            }
+            h.current = meta.current;
+            Some(h)
+        }
+        _ => return Err(invalid(&path, "the settings and the saved state disagree on whether this is DHRM")),
+    };
     CrmTrainer::restored(
         state.settings,
         td3,
@@ -186,6 +253,7 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<CrmTrainer, StoreError> {
         state.raw_obs,
         (state.machine_state, state.episode_return),
         (state.steps, state.chunks),
+        hierarchy,
     )
     .map_err(|e| invalid(&path, e.to_string()))
 }

@@ -71,7 +71,8 @@ pub enum RunKind {
     Joint,
     /// `schrl baseline train --algo tltl`: a flat policy trained on a task's robustness.
     Tltl,
-    /// `schrl baseline train --algo crm`: a flat policy trained on a reward machine.
+    /// `schrl baseline train --algo crm` or `--algo dhrm`: a flat policy (DHRM: options
+    /// under a meta-controller) trained on a reward machine.
     Crm,
 }
 
@@ -94,7 +95,7 @@ impl RunKind {
             RunKind::Planner => "schrl plan train",
             RunKind::Joint => "schrl train",
             RunKind::Tltl => "schrl baseline train --algo tltl",
-            RunKind::Crm => "schrl baseline train --algo crm",
+            RunKind::Crm => "schrl baseline train --algo crm|dhrm",
         }
     }
 }
