@@ -243,7 +243,7 @@ mod reward_machines {
 }
 
 mod crm {
-    use schrl::baseline::crm::{CHUNK, CrmSettings, CrmTrainer};
+    use schrl::baseline::crm::{CHUNK, CrmMetrics, CrmSettings, CrmTrainer};
     use schrl::baseline::dhrm::DhrmConfig;
     use schrl::baseline::reward_machine::RewardMachine;
     use schrl::baseline::td3::Td3Config;
@@ -299,29 +299,35 @@ mod crm {
         assert_eq!(t.machine.states[t.state], "u0");
     }
 
-    #[test]
-    fn a_resumed_crm_run_continues_exactly_as_one_that_never_stopped() {
-        // Learning starts 300 steps before the first chunk ends; the second (last) chunk
-        // is the budget's remaining 600 steps.
-        let td3 = Td3Config { learning_starts: CHUNK - 300, buffer: 10_000, ..Td3Config::default() };
-        let settings = seq_from_g1(td3, CHUNK + 600);
-        let dir = std::env::temp_dir().join(format!("schrl-crm-resume-{}", std::process::id()));
+    /// Trains `settings` for two chunks straight, and for one chunk, saved, loaded and
+    /// one more; returns both trainers and the first chunk's and second chunks' metrics.
+    fn straight_and_resumed(settings: CrmSettings, name: &str) -> (CrmTrainer, CrmTrainer, [CrmMetrics; 3]) {
+        let dir = std::env::temp_dir().join(format!("schrl-{name}-resume-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let mut run = RunWriter::create(&dir, RunKind::Crm, &settings, Existing::Refuse).unwrap();
         let mut straight = CrmTrainer::new(settings.clone()).unwrap();
         let mut stopped = CrmTrainer::new(settings).unwrap();
         straight.train_chunk().unwrap();
         let first = stopped.train_chunk().unwrap();
-        assert!(first.critic_loss.is_some(), "learning started within the first chunk");
         run.save(|f| store::crm::save_into(f, &stopped)).unwrap();
         drop((run, stopped));
         let mut resumed = store::crm::load(&dir).unwrap();
         let (a, b) = (straight.train_chunk().unwrap(), resumed.train_chunk().unwrap());
+        std::fs::remove_dir_all(&dir).unwrap();
+        (straight, resumed, [first, a, b])
+    }
+
+    #[test]
+    fn a_resumed_crm_run_continues_exactly_as_one_that_never_stopped() {
+        // Learning starts 300 steps before the first chunk ends; the second (last) chunk
+        // is the budget's remaining 600 steps.
+        let td3 = Td3Config { learning_starts: CHUNK - 300, buffer: 10_000, ..Td3Config::default() };
+        let (straight, resumed, [first, a, b]) = straight_and_resumed(seq_from_g1(td3, CHUNK + 600), "crm");
+        assert!(first.critic_loss.is_some(), "learning started within the first chunk");
         assert_eq!((a.critic_loss, &a.episodes), (b.critic_loss, &b.episodes));
         assert_eq!(straight.td3.actor_params, resumed.td3.actor_params);
         assert_eq!(straight.buffer, resumed.buffer);
         assert_eq!((straight.state, &straight.raw_obs), (resumed.state, &resumed.raw_obs));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -353,24 +359,13 @@ mod crm {
         // A meta batch of one: the meta-controller learns from the first option run on.
         let dhrm = DhrmConfig { batch: 1, target_every: 50, ..DhrmConfig::default() };
         let settings = CrmSettings { dhrm: Some(dhrm), ..seq_from_g1(td3, CHUNK + 600) };
-        let dir = std::env::temp_dir().join(format!("schrl-dhrm-resume-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let mut run = RunWriter::create(&dir, RunKind::Crm, &settings, Existing::Refuse).unwrap();
-        let mut straight = CrmTrainer::new(settings.clone()).unwrap();
-        let mut stopped = CrmTrainer::new(settings).unwrap();
-        straight.train_chunk().unwrap();
-        let first = stopped.train_chunk().unwrap();
+        let (straight, resumed, [first, a, b]) = straight_and_resumed(settings, "dhrm");
         assert!(first.meta_loss.is_some(), "the meta-controller learned within the first chunk");
-        run.save(|f| store::crm::save_into(f, &stopped)).unwrap();
-        drop((run, stopped));
-        let mut resumed = store::crm::load(&dir).unwrap();
-        let (a, b) = (straight.train_chunk().unwrap(), resumed.train_chunk().unwrap());
         assert_eq!((a.critic_loss, a.meta_loss, &a.episodes), (b.critic_loss, b.meta_loss, &b.episodes));
         assert_eq!(straight.td3.actor_params, resumed.td3.actor_params);
         let (hs, hr) = (straight.hierarchy.as_ref().unwrap(), resumed.hierarchy.as_ref().unwrap());
         assert_eq!((&hs.q_params, &hs.q_target, &hs.buffer), (&hr.q_params, &hr.q_target, &hr.buffer));
         assert_eq!(hs.current, hr.current);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
