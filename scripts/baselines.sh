@@ -4,9 +4,10 @@
 # 4 M environment-step budget: SCHRL's and HTLTL's 1 M general-controller steps count).
 # Each run goes to OUT/<method>/point-<task>-<seed>; its printed evaluation to
 # result.txt there. A run without result.txt is resumed from its last checkpoint, so
-# the script can be stopped and rerun. Then writes OUT/baselines.csv (one row per run:
-# the 5 × 100 evaluation) and OUT/fig3-point.png / .svg (`schrl plot curves`: spec
-# score against environment steps, mean ± std over seeds).
+# the script can be stopped and rerun. Then writes OUT/baselines.csv (one row per
+# finished run on SEEDS, any task and method: the 5 × 100 evaluation) and
+# OUT/fig3-point.png / .svg (`schrl plot curves`: spec score against environment
+# steps, mean ± std over seeds). METHODS may also name crm and dhrm.
 # Usage: [TASKS="seq cover"] [METHODS="schrl htltl tltl"] [JOBS=2] [SCHRL_BIN=path] \
 #        scripts/baselines.sh OUT [SEEDS...]
 set -euo pipefail
@@ -46,13 +47,16 @@ for task in "${tasks[@]}"; do
   done
 done | xargs -P "${JOBS:-2}" -L 1 bash -c 'one "$@"' _
 
+# The table and the figure cover every finished run under OUT on SEEDS, whichever
+# invocation made it, in the paper's task and method order.
 csv="$out/baselines.csv"
 echo "task,variant,seed,satisfaction,steps_to_reach" >"$csv"
 runs=()
-for task in "${tasks[@]}"; do
-  for method in "${methods[@]}"; do
+for task in seq cover branch loop signal; do
+  for method in schrl htltl tltl crm dhrm; do
     for seed in "${seeds[@]}"; do
       r="$out/$method/point-$task-$seed/result.txt"
+      [[ -f "$r" ]] || continue
       sat=$(grep '^satisfaction:' "$r" | awk '{print $2}')
       steps=$(grep '^steps to reach:' "$r" | awk '{print $4}')
       echo "$task,$method,$seed,$sat,${steps:--}" >>"$csv"
@@ -60,11 +64,14 @@ for task in "${tasks[@]}"; do
     done
   done
 done
-for task in "${tasks[@]}"; do
-  for method in "${methods[@]}"; do
-    printf '%s %s over seeds %s: satisfaction %s, steps to reach %s\n' "$task" "$method" "${seeds[*]}" \
-      "$(grep "^$task,$method," "$csv" | cut -d, -f4 | summary)" \
-      "$(grep "^$task,$method," "$csv" | cut -d, -f5 | grep -v -- - | summary)"
+for task in seq cover branch loop signal; do
+  for method in schrl htltl tltl crm dhrm; do
+    rows=$(grep "^$task,$method," "$csv" || true)
+    [[ -n "$rows" ]] || continue
+    printf '%s %s over seeds %s: satisfaction %s, steps to reach %s\n' "$task" "$method" \
+      "$(cut -d, -f3 <<<"$rows" | paste -sd' ')" \
+      "$(cut -d, -f4 <<<"$rows" | summary)" \
+      "$(cut -d, -f5 <<<"$rows" | grep -v -- - | summary)"
   done
 done
 "$bin" plot curves "${runs[@]}" --out "$out/fig3-point.png" --force
