@@ -237,3 +237,25 @@ fn bad_configurations_name_the_field() {
     c.map = "moon".into();
     assert!(ControlTrainer::new(c).err().unwrap().to_string().contains("moon"));
 }
+
+/// An option (paper App. K) chases its one goal: every reach ends the episode, and
+/// every environment's goal stays the given one through resets.
+#[test]
+fn an_option_chases_one_goal_and_each_reach_ends_its_episode() {
+    let goal = vec![0.5, 0.5];
+    let mut c = tiny_config(Robot::Point, 2, 40_000);
+    c.goal = Some(goal.clone());
+    let mut t = ControlTrainer::new(c).unwrap();
+    let (mut reached, mut episodes, mut settled) = (0, 0, 0);
+    while !t.finished() {
+        let m = t.train_update().unwrap();
+        (reached, episodes, settled) =
+            (reached + m.goals_reached, episodes + m.episodes, settled + m.goals_settled);
+        assert!(t.envs.envs().iter().all(|e| e.goal() == goal.as_slice()), "the goal never changes");
+    }
+    assert!(reached > 0, "a goal 0.7 m away is reached on a tiny budget");
+    assert_eq!(settled, episodes, "one goal per episode: reached (ending it) or lost with it");
+    let mut off = tiny_config(Robot::Point, 2, 2000);
+    off.goal = Some(vec![99.0, 0.0]);
+    assert!(ControlTrainer::new(off).err().expect("refused").to_string().contains("goal"));
+}

@@ -42,6 +42,11 @@ pub struct TrainArgs {
     /// Environments stepped together.
     #[arg(long, value_parser = super::count::<1, 4096>)]
     num_envs: Option<usize>,
+    /// Train an option for this one goal (`X,Y` or `X,Y,Z`) instead of a goal-conditioned
+    /// controller: every episode chases it and ends on reaching it (paper App. K). The
+    /// evaluation after training still draws random goals.
+    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    goal: Option<Vec<f64>>,
     #[command(flatten)]
     run: super::RunDirArgs,
     /// Save a checkpoint every this many updates (and at the end).
@@ -116,6 +121,7 @@ impl TrainArgs {
         if let Some(steps) = self.steps {
             config.total_steps = steps;
         }
+        config.goal = self.goal.clone();
         Ok(config)
     }
 
@@ -133,6 +139,7 @@ impl TrainArgs {
                 ("--seed", differs(&self.seed, &saved.seed)),
                 ("--preset", preset_differs),
                 ("--num-envs", differs(&self.num_envs, &saved.ppo.num_envs)),
+                ("--goal", self.goal.is_some() && self.goal != saved.goal),
             ],
         )?;
         Ok(ControlConfig { total_steps: self.steps.unwrap_or(saved.total_steps), ..saved.clone() })

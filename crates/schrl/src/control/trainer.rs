@@ -7,6 +7,10 @@
 //! bootstrapped with the critic) resets it. The general controller learns in the
 //! open (`empty` map for ground robots, `floor` for the Drone): it sees only the goal
 //! direction, so obstacles are the planner's business (paper §3.3).
+//!
+//! With [`ControlConfig::goal`] set it trains an *option* instead (paper App. K, the
+//! options framework the goal-conditioned controller replaces): every episode chases
+//! that one goal from a random start and ends on reaching it.
 
 use std::time::Instant;
 
@@ -35,6 +39,10 @@ pub struct ControlConfig {
     pub episode_steps: usize,
     /// PPO hyper-parameters.
     pub ppo: PpoConfig,
+    /// One fixed goal (plan space): an option policy for it, whose episodes end on
+    /// reaching it. `None`: a goal-conditioned controller (random goals).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal: Option<Vec<f64>>,
 }
 
 impl ControlConfig {
@@ -48,6 +56,7 @@ impl ControlConfig {
             total_steps: default_steps(robot),
             episode_steps: 1000,
             ppo: PpoConfig::reference(),
+            goal: None,
         }
     }
 }
@@ -100,6 +109,9 @@ pub struct ControlMetrics {
     pub mean_return: Option<f64>,
     /// Goals reached in this rollout.
     pub goals_reached: usize,
+    /// Goals settled (reached, or lost with their episode) in this rollout.
+    #[serde(default)]
+    pub goals_settled: usize,
     /// Over the last 100 settled goals: the fraction reached (a goal is settled when
     /// reached, or lost when its episode ends by collision or time-out). Optimistic
     /// next to [`crate::run::evaluate::evaluate_controller`], which gives every goal a fresh episode.
@@ -156,6 +168,17 @@ impl ControlTrainer {
         if config.episode_steps == 0 {
             return Err(ControlError::Config("episode_steps must be at least 1".into()));
         }
+        if let Some(g) = &config.goal {
+            let (low, high) = map.region();
+            let inside = g.len() == map.dim()
+                && g.iter().zip(low.iter().zip(&high)).all(|(x, (l, h))| x >= l && x <= h);
+            if !inside || map.sdf(g) <= 0.0 {
+                return Err(ControlError::Config(format!(
+                    "goal {g:?} is not a free point of the {} map (region {low:?} to {high:?}, clear of obstacles)",
+                    map.name()
+                )));
+            }
+        }
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
         let env_seed: u64 = rng.random();
         let mut envs = VecEnv::new(robot, map, config.ppo.num_envs, env_seed)?;
@@ -167,6 +190,9 @@ impl ControlTrainer {
         let learner = PpoLearner::new(config.ppo.clone(), &policy);
         let mut raw_obs = vec![0.0; config.ppo.num_envs * od];
         for (e, o) in envs.envs_mut().iter_mut().zip(raw_obs.chunks_mut(od)) {
+            if let Some(g) = &config.goal {
+                e.set_goal(g).map_err(|err| ControlError::Config(format!("goal {g:?}: {err}")))?;
+            }
             e.observe(o);
         }
         let n = config.ppo.num_envs;
@@ -259,7 +285,7 @@ impl ControlTrainer {
         let mut rewards = vec![0.0f64; n];
         let mut ends = vec![false; n];
         let mut truncated_obs: Vec<(usize, Vec<f64>)> = Vec::new();
-        let (mut episodes, mut reached) = (0usize, 0usize);
+        let (mut episodes, mut reached, mut settled) = (0usize, 0usize, 0usize);
         for _ in 0..cfg.steps_per_env() {
             if cfg.norm_obs {
                 self.obs_rms.update(&self.raw_obs);
@@ -290,18 +316,24 @@ impl ControlTrainer {
                 self.episode_returns[i] += s.reward;
                 if s.reached {
                     reached += 1;
+                    settled += 1;
                     self.recent.push_goal(true);
-                    let goal = env.sample_goal();
-                    env.set_goal(&goal)?;
-                    env.observe(o);
+                    if self.config.goal.is_none() {
+                        let goal = env.sample_goal();
+                        env.set_goal(&goal)?;
+                        env.observe(o);
+                    }
                 }
-                let end = s.terminated() || s.truncated;
+                // An option's episode ends where it reaches its goal (no bootstrap).
+                let option_done = s.reached && self.config.goal.is_some();
+                let end = s.terminated() || s.truncated || option_done;
                 ends[i] = end;
                 if end {
                     if !s.reached {
+                        settled += 1;
                         self.recent.push_goal(false);
                     }
-                    if s.truncated && !s.terminated() {
+                    if s.truncated && !s.terminated() && !option_done {
                         truncated_obs.push((i, o.to_vec()));
                     }
                     episodes += 1;
@@ -309,6 +341,10 @@ impl ControlTrainer {
                     self.episode_returns[i] = 0.0;
                     let seed: u64 = self.rng.random();
                     env.reset_into(seed, None, o)?;
+                    if let Some(g) = &self.config.goal {
+                        env.set_goal(g)?;
+                        env.observe(o);
+                    }
                 }
             }
             if cfg.norm_reward {
@@ -348,6 +384,7 @@ impl ControlTrainer {
             episodes,
             mean_return: self.recent.mean_return(),
             goals_reached: reached,
+            goals_settled: settled,
             success_rate: self.recent.success_rate(),
             lr,
             update_stats: stats,
