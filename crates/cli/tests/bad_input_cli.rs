@@ -47,6 +47,17 @@ fn bad_training_numbers_are_named_before_a_run_directory_is_made() {
         fails_with(&["train", "--task", "seq", flag, value, "--out", dir.to_str().unwrap()], needle);
         assert!(!dir.exists(), "{flag} {value} left {}", dir.display());
     }
+    let dir = temp("optionrun");
+    let out = dir.to_str().unwrap();
+    fails_with(
+        &["control", "train", "--robot", "point", "--goal", "99,0", "--out", out],
+        "is not a free point",
+    );
+    fails_with(
+        &["control", "train", "--robot", "point", "--goal", "1,1,1", "--out", out],
+        "is not a free point",
+    );
+    assert!(!dir.exists());
     let dir = temp("planrun");
     fails_with(
         &["plan", "train", "--task", "seq", "--semantics", "lse:-1", "--out", dir.to_str().unwrap()],
