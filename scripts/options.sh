@@ -35,7 +35,7 @@ converged() {
 train() { # dir seed [goal]
   local dir=$1 seed=$2 extra=()
   [[ -f "$dir/result.txt" ]] && return 0
-  [[ $# -ge 3 ]] && extra=(--goal "$3")
+  [[ $# -ge 3 ]] && extra=("--goal=$3")
   if [[ -f "$dir/manifest.json" ]]; then
     "$bin" control train --resume --out "$dir" "${extra[@]}" --eval-episodes 0 >"$dir.out" 2>"$dir.err"
   else

@@ -45,7 +45,7 @@ pub struct TrainArgs {
     /// Train an option for this one goal (`X,Y` or `X,Y,Z`) instead of a goal-conditioned
     /// controller: every episode chases it and ends on reaching it (paper App. K). The
     /// evaluation after training still draws random goals.
-    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     goal: Option<Vec<f64>>,
     #[command(flatten)]
     run: super::RunDirArgs,
