@@ -5,7 +5,8 @@
 # Each run goes to OUT/<method>/point-<task>-<seed>; its printed evaluation to
 # result.txt there. A run without result.txt is resumed from its last checkpoint, so
 # the script can be stopped and rerun. Then writes OUT/baselines.csv (one row per
-# finished run on SEEDS, any task and method: the 5 × 100 evaluation) and
+# finished run on SEEDS, any task and method: the 5 × 100 evaluation and the mean
+# training spec score over the run's last 100 000 steps) and
 # OUT/fig3-point.png / .svg (`schrl plot curves`: spec score against environment
 # steps, mean ± std over seeds). METHODS may also name crm and dhrm.
 # Usage: [TASKS="seq cover"] [METHODS="schrl htltl tltl"] [JOBS=2] [SCHRL_BIN=path] \
@@ -49,8 +50,21 @@ done | xargs -P "${JOBS:-2}" -L 1 bash -c 'one "$@"' _
 
 # The table and the figure cover every finished run under OUT on SEEDS, whichever
 # invocation made it, in the paper's task and method order.
+# Mean spec score of the training episodes logged in the run's last 100 000 steps.
+final_score() {
+  awk '{
+      if (!match($0, /"env_steps":[0-9]+/)) next
+      step = substr($0, RSTART + 12, RLENGTH - 12) + 0
+      if (!match($0, /"score":-?[0-9.eE+-]+/)) next
+      n++; steps[n] = step; score[n] = substr($0, RSTART + 8, RLENGTH - 8) + 0
+    } END {
+      if (n == 0) { print "-"; exit }
+      for (i = 1; i <= n; i++) if (steps[i] > steps[n] - 100000) { s += score[i]; k++ }
+      printf "%.3f\n", s / k
+    }' "$1/metrics.jsonl"
+}
 csv="$out/baselines.csv"
-echo "task,variant,seed,satisfaction,steps_to_reach" >"$csv"
+echo "task,variant,seed,satisfaction,steps_to_reach,final_score" >"$csv"
 runs=()
 for task in seq cover branch loop signal; do
   for method in schrl htltl tltl crm dhrm; do
@@ -59,7 +73,7 @@ for task in seq cover branch loop signal; do
       [[ -f "$r" ]] || continue
       sat=$(grep '^satisfaction:' "$r" | awk '{print $2}')
       steps=$(grep '^steps to reach:' "$r" | awk '{print $4}')
-      echo "$task,$method,$seed,$sat,${steps:--}" >>"$csv"
+      echo "$task,$method,$seed,$sat,${steps:--},$(final_score "$(dirname "$r")")" >>"$csv"
       runs+=(--run "$task:$method:$out/$method/point-$task-$seed")
     done
   done
@@ -68,10 +82,11 @@ for task in seq cover branch loop signal; do
   for method in schrl htltl tltl crm dhrm; do
     rows=$(grep "^$task,$method," "$csv" || true)
     [[ -n "$rows" ]] || continue
-    printf '%s %s over seeds %s: satisfaction %s, steps to reach %s\n' "$task" "$method" \
-      "$(cut -d, -f3 <<<"$rows" | paste -sd' ')" \
-      "$(cut -d, -f4 <<<"$rows" | summary)" \
-      "$(cut -d, -f5 <<<"$rows" | grep -v -- - | summary)"
+    printf '%s %s over seeds %s: satisfaction %s (%s), steps to reach %s, final spec score %s\n' \
+      "$task" "$method" "$(cut -d, -f3 <<<"$rows" | paste -sd' ')" \
+      "$(cut -d, -f4 <<<"$rows" | summary)" "$(cut -d, -f4 <<<"$rows" | paste -sd' ')" \
+      "$(cut -d, -f5 <<<"$rows" | grep -vx -- - | summary)" \
+      "$(cut -d, -f6 <<<"$rows" | grep -vx -- - | summary)"
   done
 done
 "$bin" plot curves "${runs[@]}" --out "$out/fig3-point.png" --force
