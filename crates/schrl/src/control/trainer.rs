@@ -109,12 +109,16 @@ pub struct ControlMetrics {
     pub mean_return: Option<f64>,
     /// Goals reached in this rollout.
     pub goals_reached: usize,
-    /// Goals settled (reached, or lost with their episode) in this rollout.
+    /// Goals settled in this rollout (see [`ControlMetrics::success_rate`]).
     #[serde(default)]
     pub goals_settled: usize,
-    /// Over the last 100 settled goals: the fraction reached (a goal is settled when
-    /// reached, or lost when its episode ends by collision or time-out). Optimistic
-    /// next to [`crate::run::evaluate::evaluate_controller`], which gives every goal a fresh episode.
+    /// Over the last 100 settled goals: the fraction reached. A goal is settled when
+    /// reached, or lost when its episode ends by collision or fall, or by the time limit
+    /// while it was the episode's first goal. A later goal cut by the time limit is not
+    /// counted (censored: it had less than an episode), so an option, whose episodes
+    /// hold one goal each, and a goal-conditioned controller are judged alike (App. K).
+    /// Optimistic next to [`crate::run::evaluate::evaluate_controller`], which gives
+    /// every goal a fresh episode.
     pub success_rate: Option<f64>,
     /// Learning rate used.
     pub lr: f64,
@@ -318,6 +322,7 @@ impl ControlTrainer {
                     reached += 1;
                     settled += 1;
                     self.recent.push_goal(true);
+                    self.recent.mark_reached(i);
                     if self.config.goal.is_none() {
                         let goal = env.sample_goal();
                         env.set_goal(&goal)?;
@@ -329,10 +334,12 @@ impl ControlTrainer {
                 let end = s.terminated() || s.truncated || option_done;
                 ends[i] = end;
                 if end {
-                    if !s.reached {
+                    let censored = s.truncated && !s.terminated() && self.recent.reached_before(i);
+                    if !s.reached && !censored {
                         settled += 1;
                         self.recent.push_goal(false);
                     }
+                    self.recent.new_episode(i);
                     if s.truncated && !s.terminated() && !option_done {
                         truncated_obs.push((i, o.to_vec()));
                     }
@@ -413,6 +420,10 @@ pub(crate) fn normalize_obs(on: bool, rms: &RunningMeanStd, raw: &[f64], out: &m
 pub struct RecentOutcomes {
     goals: std::collections::VecDeque<bool>,
     returns: std::collections::VecDeque<f64>,
+    /// Per environment: a goal has been reached in its current episode (its goal now
+    /// is not the episode's first).
+    #[serde(default)]
+    reached_in_episode: Vec<bool>,
 }
 
 impl RecentOutcomes {
@@ -424,6 +435,23 @@ impl RecentOutcomes {
             self.goals.pop_front();
         }
         self.goals.push_back(reached);
+    }
+
+    fn mark_reached(&mut self, env: usize) {
+        if self.reached_in_episode.len() <= env {
+            self.reached_in_episode.resize(env + 1, false);
+        }
+        self.reached_in_episode[env] = true;
+    }
+
+    fn reached_before(&self, env: usize) -> bool {
+        self.reached_in_episode.get(env).copied().unwrap_or(false)
+    }
+
+    fn new_episode(&mut self, env: usize) {
+        if let Some(r) = self.reached_in_episode.get_mut(env) {
+            *r = false;
+        }
     }
 
     fn push_return(&mut self, r: f64) {
