@@ -287,7 +287,15 @@ fn curves(args: CurvesArgs) -> Result<()> {
                         points.push((x, m));
                         band.push((x, m - s, m + s));
                     }
-                    Series { label: format!("{method} ({} seeds)", runs.len()), points, band }
+                    Series {
+                        label: format!(
+                            "{method} ({} seed{})",
+                            runs.len(),
+                            if runs.len() == 1 { "" } else { "s" }
+                        ),
+                        points,
+                        band,
+                    }
                 })
                 .collect();
             ChartPanel {
