@@ -1,6 +1,8 @@
 //! The paper's baselines: TLTL learns an easy spec from its robustness alone and
 //! resumes exactly; HTLTL is joint training with the Lagrange term gone; the spec
-//! score every curve plots.
+//! score every curve plots; TD3's and the meta-controller's gradients against autograd.
+
+mod common;
 
 use std::path::Path;
 
@@ -378,5 +380,115 @@ mod crm {
             .replace("to = \"done\"\non = \"g3\"\nreward = 1.0", "to = \"done\"\non = \"g3\"\nreward = 0.0");
         let err = CrmTrainer::new(settings).err().expect("refused").to_string();
         assert!(err.contains("'u3'") && err.contains("no option"), "{err}");
+    }
+}
+
+/// TD3's and the DQN meta-controller's hand-written gradients against candle's
+/// autograd of the same losses (as PPO's are checked in `control.rs`).
+mod autodiff {
+    use super::common::{assert_grads_close, candle_mlp, flat_grads};
+    use candle_core::{Device, Tensor};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use schrl::baseline::dhrm::{DhrmConfig, Hierarchy};
+    use schrl::baseline::reward_machine::RewardMachine;
+    use schrl::baseline::td3::{Td3, Td3Config};
+    use schrl::nn::mlp::TanhMlp;
+    use schrl::task::{Task, TaskKind};
+
+    const IN: usize = 5;
+    const ACT: usize = 2;
+    const HIDDEN: [usize; 2] = [7, 6];
+
+    fn uniform(rng: &mut ChaCha8Rng, n: usize, r: f32) -> Vec<f32> {
+        (0..n).map(|_| rng.random_range(-r..r)).collect()
+    }
+
+    fn td3(rng: &mut ChaCha8Rng) -> Td3 {
+        let mut t = Td3::new(IN, ACT, Td3Config { hidden: HIDDEN.to_vec(), ..Td3Config::default() }, rng);
+        // Non-trivial networks: perturb every parameter.
+        for p in t.actor_params.iter_mut().chain(t.critic_params.iter_mut()) {
+            *p += rng.random_range(-0.3..0.3);
+        }
+        t
+    }
+
+    fn sizes(i: usize, o: usize) -> Vec<usize> {
+        [vec![i], HIDDEN.to_vec(), vec![o]].concat()
+    }
+
+    #[test]
+    fn td3_critic_gradient_matches_candle_autograd() -> candle_core::Result<()> {
+        let mut rng = ChaCha8Rng::seed_from_u64(21);
+        let t = td3(&mut rng);
+        let n = 16;
+        let (x, a, y) =
+            (uniform(&mut rng, n * IN, 2.0), uniform(&mut rng, n * ACT, 1.0), uniform(&mut rng, n, 1.0));
+        let (loss, grad) = t.critic_gradient(&x, &a, &y, n);
+        let critic = TanhMlp::new(&sizes(IN + ACT, 1));
+        let qn = critic.num_params();
+        let dev = Device::Cpu;
+        let xa = Tensor::cat(
+            &[Tensor::from_slice(&x, (n, IN), &dev)?, Tensor::from_slice(&a, (n, ACT), &dev)?],
+            1,
+        )?;
+        let yt = Tensor::from_slice(&y, n, &dev)?;
+        let mut expected = Vec::new();
+        let mut total = 0.0;
+        for c in 0..2 {
+            let (q, vars) = candle_mlp(&critic, &t.critic_params[c * qn..(c + 1) * qn], &xa)?;
+            let l = q.squeeze(1)?.sub(&yt)?.sqr()?.mean_all()?;
+            total += l.to_scalar::<f32>()? as f64;
+            expected.extend(flat_grads(&l.backward()?, &vars)?);
+        }
+        assert!((total - loss).abs() < 1e-4 * (1.0 + loss.abs()), "loss {total} vs {loss}");
+        assert_grads_close(&grad, &expected, 1e-4, "critic");
+        Ok(())
+    }
+
+    #[test]
+    fn td3_actor_gradient_matches_candle_autograd() -> candle_core::Result<()> {
+        let mut rng = ChaCha8Rng::seed_from_u64(22);
+        let t = td3(&mut rng);
+        let n = 16;
+        let x = uniform(&mut rng, n * IN, 2.0);
+        let (loss, grad) = t.actor_gradient(&x, n);
+        let (actor, critic) = (TanhMlp::new(&sizes(IN, ACT)), TanhMlp::new(&sizes(IN + ACT, 1)));
+        let dev = Device::Cpu;
+        let xt = Tensor::from_slice(&x, (n, IN), &dev)?;
+        let (z, vars) = candle_mlp(&actor, &t.actor_params, &xt)?;
+        let xa = Tensor::cat(&[xt, z.tanh()?], 1)?;
+        let (q, _) = candle_mlp(&critic, &t.critic_params[..critic.num_params()], &xa)?;
+        let l = q.mean_all()?.neg()?;
+        let want = l.to_scalar::<f32>()? as f64;
+        assert!((want - loss).abs() < 1e-4 * (1.0 + loss.abs()), "loss {want} vs {loss}");
+        assert_grads_close(&grad, &flat_grads(&l.backward()?, &vars)?, 1e-4, "actor");
+        Ok(())
+    }
+
+    #[test]
+    fn dqn_meta_gradient_matches_candle_autograd() -> candle_core::Result<()> {
+        let mut rng = ChaCha8Rng::seed_from_u64(23);
+        let machine = RewardMachine::shipped(&Task::point(TaskKind::Branch)).unwrap();
+        let cfg = DhrmConfig { hidden: HIDDEN.to_vec(), ..DhrmConfig::default() };
+        let mut h = Hierarchy::new(cfg, &machine, IN, &mut rng).unwrap();
+        for p in h.q_params.iter_mut() {
+            *p += rng.random_range(-0.3..0.3);
+        }
+        let (n, k, m) = (12, h.len(), machine.len());
+        let x = uniform(&mut rng, n * (IN + m), 2.0);
+        let chosen: Vec<usize> = (0..n).map(|_| rng.random_range(0..k)).collect();
+        let y = uniform(&mut rng, n, 1.0);
+        let (loss, grad) = h.gradient(&x, &chosen, &y);
+        let q_net = TanhMlp::new(&sizes(IN + m, k));
+        let dev = Device::Cpu;
+        let (q, vars) = candle_mlp(&q_net, &h.q_params, &Tensor::from_slice(&x, (n, IN + m), &dev)?)?;
+        let mask: Vec<f32> = (0..n * k).map(|i| f32::from(u8::from(i % k == chosen[i / k]))).collect();
+        let picked = q.mul(&Tensor::from_slice(&mask, (n, k), &dev)?)?.sum(1)?;
+        let l = picked.sub(&Tensor::from_slice(&y, n, &dev)?)?.sqr()?.mean_all()?;
+        let want = l.to_scalar::<f32>()? as f64;
+        assert!((want - loss).abs() < 1e-4 * (1.0 + loss.abs()), "loss {want} vs {loss}");
+        assert_grads_close(&grad, &flat_grads(&l.backward()?, &vars)?, 1e-4, "meta Q");
+        Ok(())
     }
 }

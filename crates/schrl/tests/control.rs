@@ -1,7 +1,10 @@
 //! The PPO controller: gradients against candle's autograd, learning on a tiny
 //! budget, determinism, checkpoints and exact resume.
 
+mod common;
+
 use candle_core::{Device, Tensor, Var};
+use common::candle_mlp;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use schrl::control::policy::{ActorCritic, PolicyCache};
@@ -11,28 +14,6 @@ use schrl::control::{ControlConfig, ControlTrainer, PpoConfig};
 use schrl::run::evaluate::evaluate_controller as evaluate;
 use schrl::store::{self, Existing, RunKind, RunWriter};
 use sim::Robot;
-
-/// The same MLP in candle: weights as variables, `tanh` on hidden layers.
-fn candle_mlp(
-    mlp: &schrl::nn::mlp::TanhMlp,
-    params: &[f32],
-    x: &Tensor,
-) -> candle_core::Result<(Tensor, Vec<(Var, Var)>)> {
-    let mut h = x.clone();
-    let mut vars = Vec::new();
-    for l in 0..mlp.num_layers() {
-        let (i, o) = (mlp.sizes()[l], mlp.sizes()[l + 1]);
-        let (wr, br) = mlp.layer_ranges(l);
-        let w = Var::from_tensor(&Tensor::from_slice(&params[wr], (o, i), &Device::Cpu)?)?;
-        let b = Var::from_tensor(&Tensor::from_slice(&params[br], o, &Device::Cpu)?)?;
-        h = h.matmul(&w.as_tensor().t()?)?.broadcast_add(b.as_tensor())?;
-        if l + 1 < mlp.num_layers() {
-            h = h.tanh()?;
-        }
-        vars.push((w, b));
-    }
-    Ok((h, vars))
-}
 
 fn random_minibatch(policy: &ActorCritic, n: usize, rng: &mut ChaCha8Rng) -> Minibatch {
     let (od, ad) = (policy.obs_dim(), policy.act_dim());
