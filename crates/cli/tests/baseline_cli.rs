@@ -106,6 +106,12 @@ fn crm_trains_with_a_machine_file_resumes_and_evaluates() {
         a.extend_from_slice(extra);
         schrl(&a)
     };
+    let o = train(&["--task", task, "--gamma", "0.999"]);
+    assert!(
+        !o.status.success() && text(&o.stderr).contains("--gamma is TLTL's discount"),
+        "{}",
+        text(&o.stderr)
+    );
     // A user task has no shipped machine: the error says what to do.
     let o = train(&["--task", task, "--steps", "4000"]);
     assert!(

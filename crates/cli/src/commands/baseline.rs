@@ -84,6 +84,10 @@ pub struct TrainArgs {
     algo: Algo,
     #[command(flatten)]
     common: CommonArgs,
+    /// Discount γ of TLTL's PPO [default: 0.99, the controller's]: its reward is paid at
+    /// the episode's end, so γ sets how much of it reaches the first steps.
+    #[arg(long)]
+    gamma: Option<f64>,
     /// The reward machine (crm, dhrm): a machine file [default: the task's shipped machine,
     /// tasks/machines/<task>.toml].
     #[arg(long)]
@@ -123,6 +127,9 @@ const FLAT_SAVE_EVERY: usize = 25;
 /// Runs `schrl baseline ...`.
 pub fn run(cmd: Command) -> Result<()> {
     match cmd {
+        Command::Train(args) if args.gamma.is_some() && args.algo != Algo::Tltl => {
+            bail!("--gamma is TLTL's discount; {} takes none", format!("{:?}", args.algo).to_lowercase())
+        }
         Command::Train(args) if args.machine.is_some() && !matches!(args.algo, Algo::Crm | Algo::Dhrm) => {
             bail!(
                 "--machine is a reward machine for --algo crm or dhrm; {} takes none",
@@ -186,7 +193,10 @@ impl FlatSettings for TltlSettings {
             task_spec: task.spec.clone(),
             seed: c.seed.unwrap_or(0),
             steps: c.steps.unwrap_or(FLAT_STEPS),
-            ppo: PpoConfig::reference(),
+            ppo: PpoConfig {
+                gamma: args.gamma.unwrap_or(PpoConfig::reference().gamma),
+                ..PpoConfig::reference()
+            },
             eval_groups: c.eval_groups.unwrap_or(EVAL_GROUPS),
             save_every: c.save_every.unwrap_or(FLAT_SAVE_EVERY),
         })
@@ -194,8 +204,8 @@ impl FlatSettings for TltlSettings {
     fn identity(&self) -> (Robot, &str, &str, u64) {
         (self.robot, &self.task_toml, &self.task_spec, self.seed)
     }
-    fn conflicts(&self, _: &TrainArgs) -> Result<Vec<(&'static str, bool)>> {
-        Ok(vec![])
+    fn conflicts(&self, args: &TrainArgs) -> Result<Vec<(&'static str, bool)>> {
+        Ok(vec![("--gamma", super::differs(&args.gamma, &self.ppo.gamma))])
     }
     fn budget(&mut self) -> (&mut usize, &mut usize, &mut usize) {
         (&mut self.steps, &mut self.eval_groups, &mut self.save_every)
