@@ -1,3 +1,25 @@
-//! The `schrl` binary links MuJoCo when built with `--features mujoco`: the same
-//! rpath as the sim crate's own binaries (see that build script).
-include!("../sim/build.rs");
+//! Records the git commit the binary is built from, for the results it writes
+//! (`schrl experiment` records name it): `SCHRL_GIT_COMMIT`, absent outside a checkout.
+
+use std::process::Command;
+
+fn git(args: &[&str]) -> Option<String> {
+    let out = Command::new("git").args(args).output().ok()?;
+    out.status.success().then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+}
+
+fn main() {
+    println!("cargo:rerun-if-changed=build.rs");
+    let Some(git_dir) = git(&["rev-parse", "--absolute-git-dir"]) else { return };
+    // A new commit moves HEAD or the branch it names.
+    // (A missing path would rerun this script on every build.)
+    for path in ["HEAD", "refs/heads", "packed-refs"] {
+        let path = format!("{git_dir}/{path}");
+        if std::path::Path::new(&path).exists() {
+            println!("cargo:rerun-if-changed={path}");
+        }
+    }
+    if let Some(commit) = git(&["rev-parse", "HEAD"]) {
+        println!("cargo:rustc-env=SCHRL_GIT_COMMIT={commit}");
+    }
+}

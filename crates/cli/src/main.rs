@@ -9,7 +9,9 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod commands;
+mod experiment;
 mod interrupt;
+mod report;
 
 /// Teach robots tasks written as Signal Temporal Logic specifications.
 #[derive(Parser, Debug)]
@@ -48,6 +50,11 @@ enum Command {
     /// Pictures of results: grouped bars (Fig. 4).
     #[command(subcommand)]
     Plot(commands::plot::Command),
+    /// One of the paper's tables or figures, cell by cell (resumable; one cell per
+    /// cluster array task with --cell or the scheduler's index).
+    Experiment(commands::experiment::Args),
+    /// Experiment results as markdown tables and a static HTML page.
+    Report(commands::report::Args),
 }
 
 fn main() -> ExitCode {
@@ -70,6 +77,8 @@ fn main() -> ExitCode {
         Command::Eval(args) => commands::train::eval(args),
         Command::Baseline(cmd) => commands::baseline::run(cmd),
         Command::Plot(cmd) => commands::plot::run(cmd),
+        Command::Experiment(args) => commands::experiment::run(args),
+        Command::Report(args) => commands::report::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -2,8 +2,10 @@
 
 pub mod baseline;
 pub mod control;
+pub mod experiment;
 pub mod plan;
 pub mod plot;
+pub mod report;
 pub mod robustness;
 pub mod sdf;
 pub mod sim;

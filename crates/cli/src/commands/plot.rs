@@ -60,6 +60,19 @@ pub fn run(cmd: Command) -> Result<()> {
     }
 }
 
+/// One run's result in a bar chart: its task, variant and evaluation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BarRow {
+    /// Task (a group of bars).
+    pub task: String,
+    /// Variant (a bar in every group).
+    pub variant: String,
+    /// Satisfaction of the run.
+    pub satisfaction: f64,
+    /// Steps to reach, if any run satisfied.
+    pub steps_to_reach: Option<f64>,
+}
+
 /// One (task, variant): its values over seeds.
 #[derive(Default)]
 struct Cell {
@@ -70,14 +83,14 @@ struct Cell {
 /// The cells by (task, variant).
 type Cells = BTreeMap<(String, String), Cell>;
 
-fn read(path: &PathBuf) -> Result<(Vec<String>, Vec<String>, Cells)> {
+fn read(path: &PathBuf) -> Result<Vec<BarRow>> {
     let mut reader = csv::Reader::from_path(path).with_context(|| format!("{}", path.display()))?;
     let header: Vec<String> = reader.headers()?.iter().map(str::to_string).collect();
     let want = ["task", "variant", "seed", "satisfaction", "steps_to_reach"];
     if header != want {
         bail!("{}: the header must be `{}`, got `{}`", path.display(), want.join(","), header.join(","));
     }
-    let (mut tasks, mut variants, mut cells) = (Vec::new(), Vec::new(), Cells::new());
+    let mut rows = Vec::new();
     for (i, row) in reader.records().enumerate() {
         let row = row.with_context(|| format!("{}: row {}", path.display(), i + 2))?;
         let number = |col: usize| -> Result<Option<f64>> {
@@ -88,27 +101,41 @@ fn read(path: &PathBuf) -> Result<(Vec<String>, Vec<String>, Cells)> {
                 }),
             }
         };
-        let (task, variant) = (row[0].to_string(), row[1].to_string());
-        if !tasks.contains(&task) {
-            tasks.push(task.clone());
-        }
-        if !variants.contains(&variant) {
-            variants.push(variant.clone());
-        }
-        let cell = cells.entry((task, variant)).or_default();
-        cell.satisfaction.push(number(3)?.unwrap_or(0.0));
-        if let Some(s) = number(4)? {
-            cell.steps_to_reach.push(s);
-        }
+        rows.push(BarRow {
+            task: row[0].to_string(),
+            variant: row[1].to_string(),
+            satisfaction: number(3)?.unwrap_or(0.0),
+            steps_to_reach: number(4)?,
+        });
     }
-    if cells.is_empty() {
+    if rows.is_empty() {
         bail!("{}: no rows", path.display());
     }
-    Ok((tasks, variants, cells))
+    Ok(rows)
 }
 
 fn bars(args: BarsArgs) -> Result<()> {
-    let (tasks, variants, cells) = read(&args.results)?;
+    save_bar_chart(&read(&args.results)?, &args.out, args.force)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// Grouped bars of satisfaction and steps to reach (mean ± std over a task's and
+/// variant's rows), each normalised within its task by the largest variant; tasks and
+/// variants in the order they first appear.
+pub fn save_bar_chart(rows: &[BarRow], out: &Path, force: bool) -> Result<()> {
+    let (mut tasks, mut variants, mut cells) = (Vec::new(), Vec::new(), Cells::new());
+    for r in rows {
+        if !tasks.contains(&r.task) {
+            tasks.push(r.task.clone());
+        }
+        if !variants.contains(&r.variant) {
+            variants.push(r.variant.clone());
+        }
+        let cell = cells.entry((r.task.clone(), r.variant.clone())).or_default();
+        cell.satisfaction.push(r.satisfaction);
+        cell.steps_to_reach.extend(r.steps_to_reach);
+    }
     let stats = |xs: &[f64]| schrl::run::evaluate::mean_std(xs);
     // [variant][task] means and stds, then each task divided by its largest mean.
     let measure = |pick: fn(&Cell) -> &[f64]| {
@@ -153,8 +180,7 @@ fn bars(args: BarsArgs) -> Result<()> {
             },
         ],
     };
-    save_bars(&chart, &args.out, args.force)?;
-    println!("wrote {}", args.out.display());
+    save_bars(&chart, out, force)?;
     Ok(())
 }
 
@@ -241,15 +267,39 @@ fn binned(curve: &Curve, max_x: f64, bins: usize) -> Vec<Option<f64>> {
 }
 
 fn curves(args: CurvesArgs) -> Result<()> {
-    sim::render::check_target(&args.out, args.force)?;
-    // (task, method) in the order given, each with its runs' points.
-    let mut cells: Vec<((String, String), Vec<Curve>)> = vec![];
+    let mut runs = vec![];
     for spec in &args.runs {
         let mut parts = spec.splitn(3, ':');
         let (Some(task), Some(method), Some(dir)) = (parts.next(), parts.next(), parts.next()) else {
             bail!("--run {spec}: expected TASK:METHOD:DIR");
         };
-        let points = scores(Path::new(dir))?;
+        runs.push(CurveRun { task: task.into(), method: method.into(), dir: dir.into() });
+    }
+    save_curves(&runs, args.bins, &args.out, args.force)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// A training run in a curves chart.
+#[derive(Clone, Debug)]
+pub struct CurveRun {
+    /// Task (a panel).
+    pub task: String,
+    /// Method (a line; its runs are its seeds).
+    pub method: String,
+    /// Run directory of `schrl train` or `schrl baseline train`.
+    pub dir: PathBuf,
+}
+
+/// The spec score of training runs against environment steps, in `bins` points, mean
+/// ± std over each (task, method)'s runs: a panel per task, a line per method, in the
+/// order given.
+pub fn save_curves(runs: &[CurveRun], bins: usize, out: &Path, force: bool) -> Result<()> {
+    sim::render::check_target(out, force)?;
+    // (task, method) in the order given, each with its runs' points.
+    let mut cells: Vec<((String, String), Vec<Curve>)> = vec![];
+    for CurveRun { task, method, dir } in runs {
+        let points = scores(dir)?;
         let key = (task.to_string(), method.to_string());
         match cells.iter_mut().find(|(k, _)| *k == key) {
             Some((_, runs)) => runs.push(points),
@@ -275,15 +325,15 @@ fn curves(args: CurvesArgs) -> Result<()> {
                 .filter(|((t, _), _)| t == task)
                 .map(|((_, method), runs)| {
                     let per_run: Vec<Vec<Option<f64>>> =
-                        runs.iter().map(|r| binned(r, max_x, args.bins)).collect();
+                        runs.iter().map(|r| binned(r, max_x, bins)).collect();
                     let (mut points, mut band) = (vec![], vec![]);
-                    for k in 0..args.bins {
+                    for k in 0..bins {
                         let values: Vec<f64> = per_run.iter().filter_map(|r| r[k]).collect();
                         if values.is_empty() {
                             continue;
                         }
                         let (m, s) = schrl::run::evaluate::mean_std(&values);
-                        let x = max_x * (k + 1) as f64 / args.bins as f64;
+                        let x = max_x * (k + 1) as f64 / bins as f64;
                         points.push((x, m));
                         band.push((x, m - s, m + s));
                     }
@@ -306,7 +356,6 @@ fn curves(args: CurvesArgs) -> Result<()> {
             }
         })
         .collect();
-    sim::render::save_chart(&panels, "environment steps", &args.out, args.force)?;
-    println!("wrote {}", args.out.display());
+    sim::render::save_chart(&panels, "environment steps", out, force)?;
     Ok(())
 }

@@ -244,7 +244,7 @@ pub(crate) fn save_file(path: &Path, contents: &[u8], force: bool) -> Result<(),
 }
 
 /// Writes `path` through a temporary sibling, synced, then renamed over it.
-pub(crate) fn write_atomic(path: &Path, contents: &[u8]) -> Result<(), StoreError> {
+pub fn write_atomic(path: &Path, contents: &[u8]) -> Result<(), StoreError> {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let tmp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
     let result = File::create(&tmp)

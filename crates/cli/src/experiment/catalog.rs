@@ -1,0 +1,262 @@
+//! What each experiment runs: its robots, tasks and methods, and each cell's
+//! invocations at full size and at `--quick` size.
+//!
+//! Full-size cells use each command's defaults (the README's numbers come from them).
+//! Quick cells cut every budget to seconds (a general controller of 20 000 steps shared
+//! by the cell's training steps, 20 000 joint or baseline steps, 20 planner updates per
+//! candidate, one evaluation group): enough to run every step end to end, not to learn.
+//!
+//! A flag value written `@name` is the path `name` inside the cell's folder
+//! ([`super::runner`] expands it).
+
+use anyhow::{Result, bail};
+
+use super::{Cell, Experiment, Selection, Step};
+
+/// The five tasks of the paper.
+const TASKS: [&str; 5] = ["seq", "cover", "branch", "loop", "signal"];
+
+/// Robots, tasks and methods of an experiment, before selection.
+struct Axes {
+    robots: &'static [&'static str],
+    tasks: &'static [&'static str],
+    methods: &'static [&'static str],
+}
+
+fn axes(e: Experiment) -> Axes {
+    let (robots, methods): (&[&str], &[&str]) = match e {
+        Experiment::Table1 => (&["doggo"], &["schrl"]),
+        Experiment::Table2 => (&["point"], &["cpg", "pg"]),
+        Experiment::Table34 => (&["point", "car", "drone"], &["schrl"]),
+        Experiment::Table5 => (&["point"], &["planners"]),
+        Experiment::Table7 => (&["point"], &["soft", "hard"]),
+        Experiment::Fig3 => (&["point"], &["schrl", "htltl", "tltl", "crm", "dhrm"]),
+        Experiment::Fig4 => (&["point"], &["ablations"]),
+        Experiment::Fig6 => (&["point"], &["gru-ode", "gru", "mlp"]),
+    };
+    Axes { robots, tasks: &TASKS, methods }
+}
+
+/// Keeps the `chosen` values of an axis, in the experiment's order; refuses one the
+/// experiment does not have.
+fn select(
+    e: Experiment,
+    what: &str,
+    all: &[&'static str],
+    chosen: &Option<Vec<String>>,
+) -> Result<Vec<&'static str>> {
+    let Some(chosen) = chosen else { return Ok(all.to_vec()) };
+    if let Some(bad) = chosen.iter().find(|c| !all.contains(&c.as_str())) {
+        bail!("--{what}: {e} has no {what} '{bad}'; it has {}", all.join(", "));
+    }
+    Ok(all.iter().copied().filter(|a| chosen.iter().any(|c| c == a)).collect())
+}
+
+/// The experiment's cells for `sel`, in a fixed order (the cluster index is a position
+/// in it): robot, task, seed, method.
+pub fn cells(e: Experiment, sel: &Selection) -> Result<Vec<Cell>> {
+    let ax = axes(e);
+    let robots = select(e, "robots", ax.robots, &sel.robots)?;
+    let tasks = select(e, "tasks", ax.tasks, &sel.tasks)?;
+    let methods = select(e, "methods", ax.methods, &sel.methods)?;
+    if sel.seeds.is_empty() {
+        bail!("--seeds: no seeds");
+    }
+    let mut cells = Vec::new();
+    for robot in &robots {
+        for task in &tasks {
+            for &seed in &sel.seeds {
+                for method in &methods {
+                    let base = Base { robot, task, seed, quick: sel.quick };
+                    let steps = steps(e, method, &base);
+                    cells.push(Cell {
+                        robot: robot.to_string(),
+                        task: task.to_string(),
+                        method: method.to_string(),
+                        seed,
+                        steps,
+                    });
+                }
+            }
+        }
+    }
+    Ok(cells)
+}
+
+/// What every step of a cell shares.
+struct Base<'a> {
+    robot: &'a str,
+    task: &'a str,
+    seed: u64,
+    quick: bool,
+}
+
+impl Base<'_> {
+    /// `--robot R --task T --seed S`.
+    fn identity(&self) -> Vec<String> {
+        strings(&["--robot", self.robot, "--task", self.task, "--seed", &self.seed.to_string()])
+    }
+
+    /// A quick cell's general controller, trained once for its `train` steps.
+    fn quick_controller(&self) -> Step {
+        let seed = self.seed.to_string();
+        let flags =
+            strings(&["--robot", self.robot, "--seed", &seed, "--steps", "20000", "--eval-episodes", "10"]);
+        Step::train(None, "control train", flags, "general")
+    }
+
+    /// `schrl train` into `run` with `extra` flags (and the quick budget).
+    fn train(&self, row: &str, extra: &[&str], run: &str) -> Step {
+        let mut flags = self.identity();
+        flags.extend(strings(extra));
+        if self.quick {
+            flags.extend(strings(&[
+                "--steps",
+                "20000",
+                "--pretrain-updates",
+                "20",
+                "--pretrain-candidates",
+                "1",
+                "--eval-groups",
+                "1",
+                "--controller",
+                "@general",
+            ]));
+        }
+        Step::train(Some(row), "train", flags, run)
+    }
+
+    /// `schrl plan train` into `run` with `extra` flags.
+    fn plan_train(&self, row: Option<&str>, extra: &[&str], run: &str) -> Step {
+        let mut flags = strings(&["--task", self.task, "--seed", &self.seed.to_string()]);
+        flags.extend(strings(extra));
+        if self.quick {
+            flags.extend(strings(&["--updates", "20"]));
+        }
+        Step { row: row.map(str::to_string), ..Step::train(None, "plan train", flags, run) }
+    }
+
+    /// Evaluation sizes: the protocol's 5 × 100, or one group of 20 when quick.
+    fn eval_sizes(&self) -> Vec<String> {
+        if self.quick { strings(&["--groups", "1", "--per-group", "20"]) } else { vec![] }
+    }
+}
+
+fn strings(s: &[&str]) -> Vec<String> {
+    s.iter().map(|s| s.to_string()).collect()
+}
+
+/// The steps of one cell.
+fn steps(e: Experiment, method: &str, b: &Base) -> Vec<Step> {
+    let mut steps = Vec::new();
+    let trains = matches!(e, Experiment::Table1 | Experiment::Table34 | Experiment::Fig4)
+        || (e == Experiment::Fig3 && matches!(method, "schrl" | "htltl"));
+    if b.quick && trains {
+        steps.push(b.quick_controller());
+    }
+    match e {
+        Experiment::Table1 | Experiment::Table34 => steps.push(b.train(method, &[], "run")),
+        Experiment::Fig3 => match method {
+            "schrl" => steps.push(b.train(method, &[], "run")),
+            // HTLTL is `train --method pg` (what `baseline train --algo htltl` runs); the
+            // quick budget needs flags only `train` takes.
+            "htltl" if b.quick => steps.push(b.train(method, &["--method", "pg"], "run")),
+            algo => {
+                let mut flags = b.identity();
+                if b.quick {
+                    flags.extend(strings(&["--steps", "20000", "--eval-groups", "1"]));
+                }
+                steps.push(Step::train(Some(method), &format!("baseline train --algo {algo}"), flags, "run"));
+            }
+        },
+        Experiment::Fig4 => {
+            steps.push(b.train("(a) SCHRL", &[], "run"));
+            steps.push(b.train("(d) frozen planner", &["--freeze-planner"], "frozen"));
+            let general = if b.quick { "@general" } else { "@run/general" };
+            let mut flags = strings(&["--ckpt", "@run", "--controller", general]);
+            flags.extend(b.eval_sizes());
+            steps.push(Step::once("(b) general controller", "eval", flags));
+            let mut flags = strings(&["--ckpt", "@run", "--planner", "gradient"]);
+            flags.extend(b.eval_sizes());
+            steps.push(Step::once("(c) gradient planner", "eval", flags));
+        }
+        Experiment::Table2 => steps.push(b.plan_train(Some(method), &["--method", method], "run")),
+        Experiment::Table7 => {
+            let extra: &[&str] = if method == "hard" { &["--semantics", "hard"] } else { &[] };
+            steps.push(b.plan_train(Some(method), extra, "run"));
+        }
+        Experiment::Fig6 => steps.push(b.plan_train(Some(method), &["--planner", method], "run")),
+        Experiment::Table5 => {
+            steps.push(b.plan_train(None, &[], "planner"));
+            let n = if b.quick { "2" } else { "100" };
+            let mut flags = strings(&["--ckpt", "@planner", "--n", n, "--planners", "network,gradient,mip"]);
+            if b.quick {
+                flags.extend(strings(&["--time-limit", "5"]));
+            }
+            steps.push(Step::once("planning time", "plan time", flags));
+        }
+    }
+    steps
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sel(quick: bool) -> Selection {
+        Selection { seeds: vec![0, 1], quick, tasks: None, robots: None, methods: None }
+    }
+
+    #[test]
+    fn every_cell_of_an_experiment_has_its_own_id() {
+        for e in Experiment::ALL {
+            for quick in [false, true] {
+                let cells = cells(e, &sel(quick)).unwrap();
+                let ids: std::collections::BTreeSet<_> = cells.iter().map(Cell::id).collect();
+                assert_eq!(ids.len(), cells.len(), "{e}");
+                assert!(
+                    cells.iter().all(|c| c.steps.iter().any(|s| s.row.is_some())),
+                    "{e}: a cell without results"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_order_is_robot_task_seed_method() {
+        let cells = cells(Experiment::Fig3, &sel(false)).unwrap();
+        assert_eq!(cells.len(), 5 * 2 * 5);
+        assert_eq!(cells[0].id(), "point-seq-schrl-0");
+        assert_eq!(cells[1].id(), "point-seq-htltl-0");
+        assert_eq!(cells[5].id(), "point-seq-schrl-1");
+        assert_eq!(cells[10].id(), "point-cover-schrl-0");
+    }
+
+    #[test]
+    fn full_cells_use_the_commands_defaults_and_quick_cells_cut_the_budget() {
+        let full = cells(Experiment::Table34, &sel(false)).unwrap();
+        assert_eq!(full[0].steps.len(), 1);
+        assert_eq!(full[0].steps[0].command, ["train"]);
+        assert_eq!(full[0].steps[0].flags, ["--robot", "point", "--task", "seq", "--seed", "0"]);
+        let quick = cells(Experiment::Table34, &sel(true)).unwrap();
+        assert_eq!(quick[0].steps[0].command, ["control", "train"]);
+        assert!(quick[0].steps[1].flags.windows(2).any(|w| w == ["--controller", "@general"]));
+    }
+
+    #[test]
+    fn selections_keep_the_experiments_order_and_refuse_what_it_lacks() {
+        let mut s = sel(false);
+        s.methods = Some(vec!["tltl".into(), "schrl".into()]);
+        s.tasks = Some(vec!["loop".into()]);
+        let cells = cells(Experiment::Fig3, &s).unwrap();
+        let ids: Vec<_> = cells.iter().map(Cell::id).collect();
+        assert_eq!(
+            ids,
+            ["point-loop-schrl-0", "point-loop-tltl-0", "point-loop-schrl-1", "point-loop-tltl-1"]
+        );
+        s.methods = Some(vec!["ppo".into()]);
+        let err = super::cells(Experiment::Fig3, &s).unwrap_err().to_string();
+        assert!(err.contains("--methods: fig3 has no methods 'ppo'"), "{err}");
+        assert!(err.contains("schrl, htltl, tltl, crm, dhrm"), "{err}");
+    }
+}
