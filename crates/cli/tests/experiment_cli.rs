@@ -43,9 +43,12 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// `schrl experiment E --quick` on seed 0 and Seq into `out`.
+/// `schrl experiment E --quick` on seed 0 (and Seq, where the experiment has tasks) into `out`.
 fn quick(e: &str, out: &Path) -> Output {
-    schrl(&["experiment", e, "--quick", "--seeds", "0", "--tasks", "seq", "--out", out.to_str().unwrap()])
+    let tasks: &[&str] = if e == "controllers" { &[] } else { &["--tasks", "seq"] };
+    schrl(
+        &[&["experiment", e, "--quick", "--seeds", "0", "--out", out.to_str().unwrap()][..], tasks].concat(),
+    )
 }
 
 /// The quick runs every other test here reads, made once.
@@ -53,7 +56,7 @@ fn quick_runs() -> &'static PathBuf {
     static RUNS: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     RUNS.get_or_init(|| {
         let root = fresh("quick");
-        for e in ["table2", "table3-4", "table5", "table7", "fig3", "fig4", "fig6"] {
+        for e in ["controllers", "table2", "table3-4", "table5", "table6", "table7", "fig3", "fig4", "fig6"] {
             ok(&quick(e, &root.join(e)));
         }
         root
@@ -64,9 +67,11 @@ fn quick_runs() -> &'static PathBuf {
 fn every_experiment_runs_end_to_end_at_quick_size() {
     let root = quick_runs();
     let expect = [
+        ("controllers", vec!["general controller"; 3], "success rate"),
         ("table2", vec!["cpg", "pg"], "updates"),
         ("table3-4", vec!["schrl"; 3], "satisfaction"),
         ("table5", vec!["planning time"], "mip seconds per plan"),
+        ("table6", vec!["4 options"], "never converged"),
         ("table7", vec!["soft", "hard"], "updates"),
         ("fig3", vec!["schrl", "htltl", "tltl", "crm", "dhrm"], "final score"),
         ("fig4", vec!["(a) SCHRL"], "satisfaction"),
@@ -87,8 +92,12 @@ fn every_experiment_runs_end_to_end_at_quick_size() {
     // Table 3–4 covers the three native robots; Fig. 4 all four variants.
     let robots: Vec<_> = results(&root.join("table3-4")).iter().map(|r| r["robot"].clone()).collect();
     assert_eq!(robots, ["point", "car", "drone"]);
+    assert!(results(&root.join("table3-4"))[0]["rows"]["schrl (sampled plans)"]["satisfaction"].is_number());
+    // Fig. 4: its four variants, and (a) and (d) on sampled plans.
     let fig4 = &results(&root.join("fig4"))[0]["rows"];
-    assert_eq!(fig4.as_object().unwrap().len(), 4);
+    assert_eq!(fig4.as_object().unwrap().len(), 6);
+    // Table 6: the conditioned controller and the sums over 1, 2 and 4 options.
+    assert_eq!(results(&root.join("table6"))[0]["rows"].as_object().unwrap().len(), 4);
     for picture in ["fig3.png", "fig3.svg", "fig4.png", "table3-4.png"] {
         let dir = root.join(&picture[..picture.find('.').unwrap()]);
         assert!(std::fs::metadata(dir.join(picture)).unwrap().len() > 1000, "{picture}");

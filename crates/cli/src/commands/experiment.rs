@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::experiment::catalog::SAMPLED;
 use crate::experiment::record::{self, Record};
 use crate::experiment::runner::{self, Identity};
 use crate::experiment::{Experiment, Selection, catalog, cluster, parse_seeds};
@@ -96,7 +97,8 @@ pub fn run(args: Args) -> Result<()> {
         }
         bar.set_message(cell.id());
         let r = runner::run_cell(&exe, &dir, e, i, cell, sel.quick)?;
-        bar.println(format!("cell {i} {}: {}", r.id, summary(&r)));
+        // (`println` on the bar would drop the line when stderr is not a terminal.)
+        bar.suspend(|| println!("cell {i} {}: {}", r.id, summary(&r)));
         bar.inc(1);
         ran += 1;
     }
@@ -153,10 +155,11 @@ pub fn plots(e: Experiment, dir: &std::path::Path, records: &[Record]) -> Result
             }
         }
         Experiment::Table1 | Experiment::Table34 | Experiment::Fig4 => {
+            // Mean paths only: the sampled-plan rows are in the tables.
             let rows: Vec<BarRow> = mine
                 .iter()
                 .flat_map(|r| {
-                    r.rows.iter().map(|(row, m)| BarRow {
+                    r.rows.iter().filter(|(row, _)| !row.ends_with(SAMPLED)).map(|(row, m)| BarRow {
                         task: r.task.clone(),
                         // Table 3–4's bars are robots; Fig. 4's its variants.
                         variant: if e == Experiment::Fig4 { row.clone() } else { r.robot.clone() },
@@ -171,7 +174,12 @@ pub fn plots(e: Experiment, dir: &std::path::Path, records: &[Record]) -> Result
                 written.push(out);
             }
         }
-        Experiment::Table2 | Experiment::Table5 | Experiment::Table7 | Experiment::Fig6 => {}
+        Experiment::Table2
+        | Experiment::Table5
+        | Experiment::Table6
+        | Experiment::Table7
+        | Experiment::Fig6
+        | Experiment::Controllers => {}
     }
     Ok(written)
 }

@@ -40,8 +40,7 @@ pub struct CurvesArgs {
 #[derive(clap::Args, Debug)]
 pub struct BarsArgs {
     /// Results CSV with the header `task,variant,seed,satisfaction,steps_to_reach`
-    /// (one row per run; steps_to_reach may be `-` when no run satisfied), as
-    /// `scripts/fig4.sh` writes it.
+    /// (one row per run; steps_to_reach may be `-` when no run satisfied).
     #[arg(long)]
     results: PathBuf,
     /// The picture (PNG or SVG).

@@ -24,6 +24,11 @@ struct Axes {
 }
 
 fn axes(e: Experiment) -> Axes {
+    let tasks: &[&str] = match e {
+        Experiment::Controllers => &["random-goals"],
+        Experiment::Table6 => &["seq"],
+        _ => &TASKS,
+    };
     let (robots, methods): (&[&str], &[&str]) = match e {
         Experiment::Table1 => (&["doggo"], &["schrl"]),
         Experiment::Table2 => (&["point"], &["cpg", "pg"]),
@@ -33,8 +38,10 @@ fn axes(e: Experiment) -> Axes {
         Experiment::Fig3 => (&["point"], &["schrl", "htltl", "tltl", "crm", "dhrm"]),
         Experiment::Fig4 => (&["point"], &["ablations"]),
         Experiment::Fig6 => (&["point"], &["gru-ode", "gru", "mlp"]),
+        Experiment::Table6 => (&["point"], &["options"]),
+        Experiment::Controllers => (&["point", "car", "drone"], &["general"]),
     };
-    Axes { robots, tasks: &TASKS, methods }
+    Axes { robots, tasks, methods }
 }
 
 /// Keeps the `chosen` values of an axis, in the experiment's order; refuses one the
@@ -68,7 +75,7 @@ pub fn cells(e: Experiment, sel: &Selection) -> Result<Vec<Cell>> {
             for &seed in &sel.seeds {
                 for method in &methods {
                     let base = Base { robot, task, seed, quick: sel.quick };
-                    let steps = steps(e, method, &base);
+                    let steps = steps(e, method, &base)?;
                     cells.push(Cell {
                         robot: robot.to_string(),
                         task: task.to_string(),
@@ -99,10 +106,18 @@ impl Base<'_> {
 
     /// A quick cell's general controller, trained once for its `train` steps.
     fn quick_controller(&self) -> Step {
-        let seed = self.seed.to_string();
-        let flags =
-            strings(&["--robot", self.robot, "--seed", &seed, "--steps", "20000", "--eval-episodes", "10"]);
+        let mut flags = self.controller_flags();
+        flags.extend(strings(&["--eval-episodes", "10"]));
         Step::train(None, "control train", flags, "general")
+    }
+
+    /// `control train`'s robot, seed and (quick) budget.
+    fn controller_flags(&self) -> Vec<String> {
+        let mut flags = strings(&["--robot", self.robot, "--seed", &self.seed.to_string()]);
+        if self.quick {
+            flags.extend(strings(&["--steps", "20000"]));
+        }
+        flags
     }
 
     /// `schrl train` into `run` with `extra` flags (and the quick budget).
@@ -147,7 +162,7 @@ fn strings(s: &[&str]) -> Vec<String> {
 }
 
 /// The steps of one cell.
-fn steps(e: Experiment, method: &str, b: &Base) -> Vec<Step> {
+fn steps(e: Experiment, method: &str, b: &Base) -> Result<Vec<Step>> {
     let mut steps = Vec::new();
     let trains = matches!(e, Experiment::Table1 | Experiment::Table34 | Experiment::Fig4)
         || (e == Experiment::Fig3 && matches!(method, "schrl" | "htltl"));
@@ -155,7 +170,12 @@ fn steps(e: Experiment, method: &str, b: &Base) -> Vec<Step> {
         steps.push(b.quick_controller());
     }
     match e {
-        Experiment::Table1 | Experiment::Table34 => steps.push(b.train(method, &[], "run")),
+        Experiment::Table1 | Experiment::Table34 => {
+            steps.push(b.train(method, &[], "run"));
+            let mut flags = strings(&["--ckpt", "@run", "--sampled-plans"]);
+            flags.extend(b.eval_sizes());
+            steps.push(Step::once(&format!("{method} (sampled plans)"), "eval", flags));
+        }
         Experiment::Fig3 => match method {
             "schrl" => steps.push(b.train(method, &[], "run")),
             // HTLTL is `train --method pg` (what `baseline train --algo htltl` runs); the
@@ -179,6 +199,11 @@ fn steps(e: Experiment, method: &str, b: &Base) -> Vec<Step> {
             let mut flags = strings(&["--ckpt", "@run", "--planner", "gradient"]);
             flags.extend(b.eval_sizes());
             steps.push(Step::once("(c) gradient planner", "eval", flags));
+            for (row, run) in [("(a) SCHRL", "@run"), ("(d) frozen planner", "@frozen")] {
+                let mut flags = strings(&["--ckpt", run, "--sampled-plans"]);
+                flags.extend(b.eval_sizes());
+                steps.push(Step::once(&format!("{row}{SAMPLED}"), "eval", flags));
+            }
         }
         Experiment::Table2 => steps.push(b.plan_train(Some(method), &["--method", method], "run")),
         Experiment::Table7 => {
@@ -195,9 +220,33 @@ fn steps(e: Experiment, method: &str, b: &Base) -> Vec<Step> {
             }
             steps.push(Step::once("planning time", "plan time", flags));
         }
+        Experiment::Controllers => {
+            let mut flags = b.controller_flags();
+            flags.extend(strings(&["--eval-episodes", "0"]));
+            steps.push(Step::train(None, "control train", flags, "run"));
+            let episodes = if b.quick { "20" } else { "500" };
+            let flags = strings(&["--ckpt", "@run", "--episodes", episodes]);
+            steps.push(Step::once("general controller", "control eval", flags));
+        }
+        Experiment::Table6 => {
+            // Its rows come from the runs' logs ([`super::record::options_rows`]).
+            let mut flags = b.controller_flags();
+            flags.extend(strings(&["--eval-episodes", "0"]));
+            steps.push(Step::train(None, "control train", flags.clone(), "conditioned"));
+            let task = schrl::task::Task::builtin(b.robot, schrl::task::TaskKind::Seq)?;
+            for (i, goal) in task.goals.iter().enumerate() {
+                let at: Vec<String> = goal.center.iter().map(f64::to_string).collect();
+                let mut flags = flags.clone();
+                flags.push(format!("--goal={}", at.join(",")));
+                steps.push(Step::train(None, "control train", flags, &format!("option-{i}")));
+            }
+        }
     }
-    steps
+    Ok(steps)
 }
+
+/// The suffix of a row that executes sampled plans instead of mean paths.
+pub const SAMPLED: &str = " (sampled plans)";
 
 #[cfg(test)]
 mod tests {
@@ -214,8 +263,10 @@ mod tests {
                 let cells = cells(e, &sel(quick)).unwrap();
                 let ids: std::collections::BTreeSet<_> = cells.iter().map(Cell::id).collect();
                 assert_eq!(ids.len(), cells.len(), "{e}");
+                // Table 6's rows come from its runs' logs, not from a step's output.
+                let derived = e == Experiment::Table6;
                 assert!(
-                    cells.iter().all(|c| c.steps.iter().any(|s| s.row.is_some())),
+                    derived || cells.iter().all(|c| c.steps.iter().any(|s| s.row.is_some())),
                     "{e}: a cell without results"
                 );
             }
@@ -235,8 +286,9 @@ mod tests {
     #[test]
     fn full_cells_use_the_commands_defaults_and_quick_cells_cut_the_budget() {
         let full = cells(Experiment::Table34, &sel(false)).unwrap();
-        assert_eq!(full[0].steps.len(), 1);
+        assert_eq!(full[0].steps.len(), 2);
         assert_eq!(full[0].steps[0].command, ["train"]);
+        assert_eq!(full[0].steps[1].flags, ["--ckpt", "@run", "--sampled-plans"]);
         assert_eq!(full[0].steps[0].flags, ["--robot", "point", "--task", "seq", "--seed", "0"]);
         let quick = cells(Experiment::Table34, &sel(true)).unwrap();
         assert_eq!(quick[0].steps[0].command, ["control", "train"]);

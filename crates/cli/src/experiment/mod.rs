@@ -42,15 +42,22 @@ pub enum Experiment {
     Fig4,
     /// Fig. 6: the planner ablation (GRU-ODE, GRU, MLP).
     Fig6,
+    /// Table 6 (App. K): steps until one goal-conditioned controller converges against
+    /// 1, 2 and 4 option policies (one per goal of Seq).
+    Table6,
+    /// The general goal-conditioned controllers: success on 500 random goals per robot.
+    Controllers,
 }
 
 impl Experiment {
     /// Every experiment, in the paper's order.
-    pub const ALL: [Experiment; 8] = [
+    pub const ALL: [Experiment; 10] = [
+        Experiment::Controllers,
         Experiment::Table1,
         Experiment::Table2,
         Experiment::Table34,
         Experiment::Table5,
+        Experiment::Table6,
         Experiment::Table7,
         Experiment::Fig3,
         Experiment::Fig4,
@@ -68,6 +75,8 @@ impl Experiment {
             Experiment::Fig3 => "fig3",
             Experiment::Fig4 => "fig4",
             Experiment::Fig6 => "fig6",
+            Experiment::Table6 => "table6",
+            Experiment::Controllers => "controllers",
         }
     }
 
@@ -82,6 +91,10 @@ impl Experiment {
             Experiment::Fig3 => "Fig. 3 / Fig. 12: SCHRL against the baselines",
             Experiment::Fig4 => "Fig. 4: policy ablations",
             Experiment::Fig6 => "Fig. 6: planner networks",
+            Experiment::Table6 => {
+                "Table 6: environment steps until convergence, goal-conditioned controller against options"
+            }
+            Experiment::Controllers => "General controllers: success on random goals",
         }
     }
 }

@@ -84,6 +84,60 @@ pub fn final_score(run: &Path, window: f64) -> Result<Option<f64>> {
     Ok(Some(tail.iter().sum::<f64>() / tail.len() as f64))
 }
 
+/// Success over the last 100 settled goals at which a controller run counts as
+/// converged (Table 6).
+pub const CONVERGED_SUCCESS: f64 = 0.95;
+/// Goals that must have been settled (reached, or lost with their episode) before a
+/// success rate counts.
+pub const CONVERGED_AFTER_GOALS: f64 = 100.0;
+
+/// The environment steps of a `control train` run's first update whose success rate
+/// over the last 100 settled goals is ≥ 0.95, once 100 goals have been settled in all
+/// (`metrics.jsonl`: `steps`, `success_rate`, `goals_settled`); `None` if it never was.
+pub fn steps_to_converge(run: &Path) -> Result<Option<f64>> {
+    let path = run.join("metrics.jsonl");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut settled = 0.0;
+    for line in text.lines().filter(|l| !l.trim().is_empty()) {
+        let v: serde_json::Value =
+            serde_json::from_str(line).with_context(|| format!("{}: a line is not JSON", path.display()))?;
+        settled += v["goals_settled"].as_f64().unwrap_or(0.0);
+        if let (Some(steps), Some(success)) = (v["steps"].as_f64(), v["success_rate"].as_f64())
+            && settled >= CONVERGED_AFTER_GOALS
+            && success >= CONVERGED_SUCCESS
+        {
+            return Ok(Some(steps));
+        }
+    }
+    Ok(None)
+}
+
+/// Table 6's rows from a cell's runs `conditioned` and `option-0`..: the steps until
+/// the goal-conditioned controller converged, and for k = 1, 2, 4 options the sum over
+/// the first k options (absent when one of them never converged). `never converged`
+/// counts the row's runs that did not.
+pub fn options_rows(cell_dir: &Path, options: usize) -> Result<BTreeMap<String, BTreeMap<String, f64>>> {
+    const METRIC: &str = "steps to converge";
+    let mut rows = BTreeMap::new();
+    let conditioned = steps_to_converge(&cell_dir.join("conditioned"))?;
+    let each: Vec<Option<f64>> = (0..options)
+        .map(|i| steps_to_converge(&cell_dir.join(format!("option-{i}"))))
+        .collect::<Result<_>>()?;
+    let mut row = |name: String, runs: &[Option<f64>]| {
+        let never = runs.iter().filter(|s| s.is_none()).count();
+        let mut m = BTreeMap::from([("never converged".to_string(), never as f64)]);
+        if let Some(sum) = runs.iter().copied().sum::<Option<f64>>() {
+            m.insert(METRIC.into(), sum);
+        }
+        rows.insert(name, m);
+    };
+    row("goal-conditioned".into(), &[conditioned]);
+    for k in [1, 2, 4].into_iter().filter(|&k| k <= options) {
+        row(format!("{k} option{}", if k == 1 { "" } else { "s" }), &each[..k]);
+    }
+    Ok(rows)
+}
+
 /// Reads the record of a cell folder, `None` when the cell has not finished.
 pub fn read(cell_dir: &Path) -> Result<Option<Record>> {
     let path = cell_dir.join(RECORD);
@@ -175,6 +229,34 @@ mod tests {
         assert_eq!(m["network seconds per plan"], 1.5e-4);
         assert!(!m.contains_key("steps to reach"));
         assert_eq!(m.len(), 4, "{m:?}");
+    }
+
+    #[test]
+    fn convergence_waits_for_100_settled_goals_and_options_add_up() {
+        let dir = std::env::temp_dir().join(format!("schrl-converge-{}", std::process::id()));
+        let log = |name: &str, lines: &[(u64, f64, u64)]| {
+            let run = dir.join(name);
+            std::fs::create_dir_all(&run).unwrap();
+            let text: Vec<String> = lines
+                .iter()
+                .map(|(s, r, g)| format!("{{\"steps\":{s},\"success_rate\":{r},\"goals_settled\":{g}}}"))
+                .collect();
+            std::fs::write(run.join("metrics.jsonl"), text.join("\n")).unwrap();
+        };
+        // Success 1.0 after 60 goals does not count; 0.96 after 120 does.
+        log("conditioned", &[(4000, 1.0, 60), (8000, 0.9, 40), (12000, 0.96, 20), (16000, 1.0, 30)]);
+        log("option-0", &[(4000, 0.97, 150)]);
+        log("option-1", &[(4000, 0.5, 150), (8000, 0.95, 10)]);
+        log("option-2", &[(4000, 0.97, 150)]);
+        log("option-3", &[(4000, 0.2, 150)]);
+        assert_eq!(steps_to_converge(&dir.join("conditioned")).unwrap(), Some(12000.0));
+        let rows = options_rows(&dir, 4).unwrap();
+        assert_eq!(rows["goal-conditioned"]["steps to converge"], 12000.0);
+        assert_eq!(rows["1 option"]["steps to converge"], 4000.0);
+        assert_eq!(rows["2 options"]["steps to converge"], 12000.0);
+        assert!(!rows["4 options"].contains_key("steps to converge"), "option 3 never converged");
+        assert_eq!(rows["4 options"]["never converged"], 1.0);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -56,8 +56,10 @@ pub fn cell_dir(dir: &Path, cell: &Cell) -> PathBuf {
 }
 
 /// The arguments of a step in `cell_dir`: `@name` flag values become paths there; a
-/// training step whose run directory already holds a run resumes it.
-pub fn arguments(step: &Step, cell_dir: &Path) -> Vec<String> {
+/// training step whose run directory already holds a run resumes it, unless `fresh`
+/// (the invocation that makes the run from nothing, which a resumed run equals bit for
+/// bit: what a record names).
+pub fn arguments(step: &Step, cell_dir: &Path, fresh: bool) -> Vec<String> {
     let expand = |a: &String| match a.strip_prefix('@') {
         Some(name) => cell_dir.join(name).display().to_string(),
         None => a.clone(),
@@ -66,7 +68,7 @@ pub fn arguments(step: &Step, cell_dir: &Path) -> Vec<String> {
     match &step.run {
         Some(run) => {
             let run = cell_dir.join(run);
-            if run.join(schrl::store::MANIFEST).exists() {
+            if !fresh && run.join(schrl::store::MANIFEST).exists() {
                 args.push("--resume".into());
             } else {
                 args.extend(step.flags.iter().map(expand));
@@ -112,8 +114,8 @@ pub fn run_cell(
     let mut rows = std::collections::BTreeMap::new();
     let mut commands = Vec::new();
     for (k, step) in cell.steps.iter().enumerate() {
-        let args = arguments(step, &cdir);
-        let typed = shell_words("schrl", &args);
+        let args = arguments(step, &cdir, false);
+        let typed = shell_words("schrl", &arguments(step, &cdir, true));
         let (out_path, err_path) = (cdir.join(format!("{k}.out")), cdir.join(format!("{k}.err")));
         let stderr =
             std::fs::File::create(&err_path).with_context(|| format!("creating {}", err_path.display()))?;
@@ -159,6 +161,11 @@ pub fn run_cell(
         }
         commands.push(typed);
     }
+    if e == Experiment::Table6 {
+        let options =
+            cell.steps.iter().filter(|s| s.run.as_deref().is_some_and(|r| r.starts_with("option-"))).count();
+        rows.extend(record::options_rows(&cdir, options)?);
+    }
     let record = Record {
         experiment: e.name().into(),
         cell: index,
@@ -193,13 +200,14 @@ mod tests {
             vec!["--task".into(), "seq".into(), "--controller".into(), "@general".into()],
             "run",
         );
-        let fresh = arguments(&step, &dir);
+        let fresh = arguments(&step, &dir, false);
         let general = dir.join("general").display().to_string();
         let run = dir.join("run").display().to_string();
         assert_eq!(fresh, ["train", "--task", "seq", "--controller", &general, "--out", &run]);
         std::fs::create_dir_all(dir.join("run")).unwrap();
         std::fs::write(dir.join("run").join(schrl::store::MANIFEST), "{}").unwrap();
-        assert_eq!(arguments(&step, &dir), ["train", "--resume", "--out", &run]);
+        assert_eq!(arguments(&step, &dir, false), ["train", "--resume", "--out", &run]);
+        assert_eq!(arguments(&step, &dir, true), fresh, "records name the fresh invocation");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -53,6 +53,14 @@ fn columns(e: Experiment) -> Vec<Column> {
             col("mean-path satisfaction", "satisfaction (mean paths)", fixed3),
             col("updates", "updates", whole),
         ],
+        Experiment::Table6 => vec![
+            col("steps to converge", "environment steps until convergence", sci),
+            col("never converged", "runs that never converged", whole),
+        ],
+        Experiment::Controllers => vec![
+            col("success rate", "success rate", fixed3),
+            col("mean steps to reach", "steps to reach", fixed1),
+        ],
         Experiment::Table5 => vec![
             col("network seconds per plan", "network (s per plan)", sci),
             col("gradient seconds per plan", "gradient planner (s per plan)", sci),
