@@ -1,5 +1,9 @@
 //! Records the git commit the binary is built from, for the results it writes
 //! (`schrl experiment` records name it): `SCHRL_GIT_COMMIT`, absent outside a checkout.
+//! With `--features mujoco` the binary links MuJoCo: the same rpath as the sim crate's
+//! own binaries.
+
+include!("../sim/mujoco_rpath.rs");
 
 use std::process::Command;
 
@@ -9,6 +13,7 @@ fn git(args: &[&str]) -> Option<String> {
 }
 
 fn main() {
+    mujoco_rpath();
     println!("cargo:rerun-if-changed=build.rs");
     let Some(git_dir) = git(&["rev-parse", "--absolute-git-dir"]) else { return };
     // A new commit moves HEAD or the branch it names.

@@ -104,6 +104,18 @@ fn every_experiment_runs_end_to_end_at_quick_size() {
     }
 }
 
+/// Table 1 (Doggo) needs MuJoCo: CI runs it with `--features mujoco`.
+#[cfg(feature = "mujoco")]
+#[test]
+fn table1_runs_doggo_at_quick_size() {
+    let out = fresh("table1");
+    ok(&quick("table1", &out));
+    let r = &results(&out)[0];
+    assert_eq!(r["robot"], "doggo");
+    assert!(r["rows"]["schrl"]["satisfaction"].is_number(), "{r}");
+    assert!(out.join("table1.png").exists());
+}
+
 #[test]
 fn finished_cells_are_skipped_and_another_budget_is_refused() {
     let root = quick_runs();
