@@ -118,13 +118,16 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// A record's headline numbers, for the progress log.
+/// A record's headline numbers, for the progress log: each row's first two numbers
+/// (satisfaction first where there is one).
 fn summary(r: &Record) -> String {
     r.rows
         .iter()
         .map(|(row, m)| {
-            let sat = m.get("satisfaction").map_or("-".into(), |s| format!("{s:.3}"));
-            format!("{row}: satisfaction {sat}")
+            let mut named: Vec<(&String, &f64)> = m.iter().filter(|(k, _)| !k.ends_with(" std")).collect();
+            named.sort_by_key(|(k, _)| k.as_str() != "satisfaction");
+            let numbers: Vec<String> = named.iter().take(2).map(|(k, v)| format!("{k} {v:.4}")).collect();
+            format!("{row}: {}", numbers.join(", "))
         })
         .collect::<Vec<_>>()
         .join("; ")
