@@ -431,6 +431,9 @@ fn train(args: TrainArgs) -> Result<()> {
         out.display()
     );
     println!("updates: {done}");
+    if reached {
+        println!("updates to target: {done}");
+    }
     println!("restarts: {}", trainer.restarts());
     // Sampled paths are what training sees; mean paths are what `schrl train` deploys.
     println!("mean-path satisfaction: {}", trainer.mean_satisfaction(200)?);

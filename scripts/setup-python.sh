@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Builds and installs the `schrl` Python package (python/, a maturin project) with its
+# test dependencies into a virtual environment, `.venv/` at the repository root
+# (git-ignored): `pip install ./python[test]` fetches maturin from PyPI for the build
+# and compiles the Rust extension (release profile) with cargo. Then
+#   .venv/bin/python -m pytest python/tests
+# Needs: python3 ≥ 3.9 with venv and pip, and cargo. PYTHON picks the interpreter.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+PYTHON=${PYTHON:-python3}
+if [[ ! -x .venv/bin/python ]]; then
+    "$PYTHON" -m venv .venv
+fi
+.venv/bin/python -m pip install -q --upgrade pip
+.venv/bin/python -m pip install -q "./python[test]"
+.venv/bin/python -c "import schrl.stl; print('setup-python: schrl installed in .venv')"
