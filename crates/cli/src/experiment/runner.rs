@@ -92,7 +92,8 @@ pub fn shell_words(program: &str, args: &[String]) -> String {
     std::iter::once(program).chain(args.iter().map(String::as_str)).map(quote).collect::<Vec<_>>().join(" ")
 }
 
-/// The commit this binary was built from (`unknown` outside a git checkout).
+/// The commit HEAD named when this binary was built (`unknown` outside a git
+/// checkout); changes not yet committed then are not marked.
 pub const COMMIT: &str = match option_env!("SCHRL_GIT_COMMIT") {
     Some(c) => c,
     None => "unknown",
