@@ -147,3 +147,15 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
     save(&scene("duck"), &svg, false).unwrap();
     assert!(std::fs::read_to_string(&svg).unwrap().contains("z (m)"), "the side view's axis");
 }
+
+#[test]
+fn rgb_renders_in_memory_what_a_png_would_show() {
+    let scene = scene("walls");
+    let (w, h, pixels) = sim::render::rgb(&scene).unwrap();
+    assert_eq!((w, h), image_size(&scene));
+    assert_eq!(pixels.len(), w as usize * h as usize * 3);
+    // Background, walls, goals and paths: more than one colour.
+    let first = &pixels[..3];
+    let different = pixels.chunks(3).filter(|p| p != &first).count();
+    assert!(different > pixels.len() / 3 / 20, "{different} pixels differ from the first");
+}

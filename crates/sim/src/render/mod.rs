@@ -378,6 +378,19 @@ pub fn save(scene: &Scene, out: &Path, overwrite: bool) -> Result<(), RenderErro
     write_picture(out, overwrite, image_size(scene), |root| draw(root, scene), |root| draw(root, scene))
 }
 
+/// Draws `scene` into memory: `(width, height, pixels)`, the pixels row-major RGB, 3
+/// bytes each (what a Gymnasium `render()` returns as `rgb_array`).
+pub fn rgb(scene: &Scene) -> Result<(u32, u32, Vec<u8>), RenderError> {
+    style::ensure_fonts();
+    let (w, h) = image_size(scene);
+    let mut pixels = vec![0u8; w as usize * h as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
+        draw(root, scene).map_err(|message| RenderError::Write { path: "<memory>".into(), message })?;
+    }
+    Ok((w, h, pixels))
+}
+
 /// Draws a scalar field over a ground map's region (e.g. a learned signed distance),
 /// top view at 100 px per metre: cells coloured blue where the field is positive and
 /// red where negative, darker with |value| (saturating at 2 m), black where it changes
