@@ -1,16 +1,19 @@
 //! `schrl._schrl`: the native module under the `schrl` Python package.
 //!
 //! [`spec`] backs `schrl.stl` (robustness on NumPy arrays); [`envs`] backs
-//! `schrl.envs` (the robots as Gymnasium environments, single and vectorised).
+//! `schrl.envs` (the robots as Gymnasium environments, single and vectorised); [`run`]
+//! backs `schrl.load_planner` and `schrl.evaluate` (trained runs).
 
 use pyo3::prelude::*;
 
 mod envs;
+mod run;
 mod spec;
 
 /// The native module.
 #[pymodule]
 fn _schrl(m: &Bound<'_, PyModule>) -> PyResult<()> {
     spec::register(m)?;
-    envs::register(m)
+    envs::register(m)?;
+    run::register(m)
 }

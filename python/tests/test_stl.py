@@ -1,30 +1,18 @@
 """schrl.stl on NumPy arrays: values equal the CLI's, batches equal single paths,
 gradients equal finite differences, errors name what is wrong, the GIL is released."""
 
-import os
-import shutil
 import subprocess
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from schrl.stl import AfterStep, AvoidBoxes, Ball, Halfspace, Spec, SpecError
 
-REPO = Path(__file__).resolve().parents[2]
+from cli import schrl_cli
+
 SEMANTICS = ["hard", "soft:2", "lse:0.5", "soft:10,until=flat", "lse:0.5,until=recursive"]
-
-
-def schrl_cli():
-    """The `schrl` binary: $SCHRL_BIN, else a build in target/ (CI has one)."""
-    for candidate in [os.environ.get("SCHRL_BIN"), REPO / "target/debug/schrl", REPO / "target/release/schrl"]:
-        if candidate and Path(candidate).is_file():
-            return str(candidate)
-    if os.environ.get("CI") == "true":
-        pytest.fail("CI needs the schrl binary: build it (cargo build -p schrl-cli) or set SCHRL_BIN")
-    pytest.skip("no schrl binary to compare with (cargo build -p schrl-cli)")
 
 
 def cli_robustness(spec, path, signals, semantics, tmp_path):
