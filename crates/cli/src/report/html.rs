@@ -22,7 +22,7 @@ window.addEventListener("load", () => {
 
 const STYLE: &str = "body{font-family:sans-serif;max-width:72rem;margin:2rem auto;padding:0 1rem}\
 table{border-collapse:collapse;margin:1rem 0}th,td{border:1px solid #bbb;padding:.25rem .5rem;text-align:right}\
-th{background:#eee}td:nth-child(-n+3){text-align:left}figure{display:inline-block;margin:.5rem}\
+th{background:#eee}td:nth-child(-n+3),th:nth-child(-n+3){text-align:left}figure{display:inline-block;margin:.5rem}\
 figure img{max-width:34rem;border:1px solid #ddd}figcaption{font-size:.85rem;color:#444}";
 
 /// The page.
