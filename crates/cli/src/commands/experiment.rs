@@ -2,6 +2,7 @@
 //! one cell per cluster array task if asked.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -46,6 +47,10 @@ pub struct Args {
     /// Print the cells (position, id, commands) and exit.
     #[arg(long)]
     list: bool,
+    /// Cells run at once (each is one process at a time; one core each with
+    /// `RAYON_NUM_THREADS=1`).
+    #[arg(long, default_value_t = 1, value_parser = super::count::<1, 256>)]
+    jobs: usize,
 }
 
 /// Runs `schrl experiment`.
@@ -87,20 +92,43 @@ pub fn run(args: Args) -> Result<()> {
             .expect("a valid template"),
     );
     bar.set_prefix(e.name());
-    let mut ran = 0;
+    // Cells not finished yet, handed out one at a time to `--jobs` workers; the first
+    // failure stops handing out more (cells already running finish).
+    let mut todo = vec![];
     for &i in &chosen {
-        let cell = &cells[i];
-        let cdir = runner::cell_dir(&dir, cell);
-        if record::read(&cdir)?.is_some() {
+        if record::read(&runner::cell_dir(&dir, &cells[i]))?.is_some() {
             bar.inc(1);
-            continue;
+        } else {
+            todo.push(i);
         }
-        bar.set_message(cell.id());
-        let r = runner::run_cell(&exe, &dir, e, i, cell, sel.quick)?;
-        // (`println` on the bar would drop the line when stderr is not a terminal.)
-        bar.suspend(|| println!("cell {i} {}: {}", r.id, summary(&r)));
-        bar.inc(1);
-        ran += 1;
+    }
+    let next = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    let ran = AtomicUsize::new(0);
+    let work = || -> Result<()> {
+        while !failed.load(Ordering::SeqCst) {
+            let Some(&i) = todo.get(next.fetch_add(1, Ordering::SeqCst)) else { return Ok(()) };
+            let cell = &cells[i];
+            bar.set_message(cell.id());
+            let r = runner::run_cell(&exe, &dir, e, i, cell, sel.quick)
+                .inspect_err(|_| failed.store(true, Ordering::SeqCst))?;
+            // (`println` on the bar would drop the line when stderr is not a terminal.)
+            bar.suspend(|| println!("cell {i} {}: {}", r.id, summary(&r)));
+            bar.inc(1);
+            ran.fetch_add(1, Ordering::SeqCst);
+        }
+        Ok(())
+    };
+    let results: Vec<Result<()>> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..args.jobs.min(todo.len()).max(1)).map(|_| scope.spawn(work)).collect();
+        workers.into_iter().map(|w| w.join().expect("a worker does not panic")).collect()
+    });
+    let ran = ran.into_inner();
+    if let Some(err) = results.into_iter().find_map(Result::err) {
+        bar.finish_and_clear();
+        // What the other workers finished is kept in results.jsonl.
+        record::merge(&dir)?;
+        return Err(err);
     }
     bar.finish_and_clear();
     let records = record::merge(&dir)?;
