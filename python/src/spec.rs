@@ -181,6 +181,17 @@ struct Paths {
     dim: usize,
 }
 
+impl Paths {
+    /// One value per path as Python sees it: a float for a single path, an array for a
+    /// batch.
+    fn values(&self, py: Python<'_>, values: Vec<f64>) -> PyResult<PyObject> {
+        Ok(match self.batch {
+            None => values[0].into_pyobject(py)?.into_any().unbind(),
+            Some(_) => values.into_pyarray(py).into_any().unbind(),
+        })
+    }
+}
+
 fn semantics(text: &str) -> PyResult<Semantics> {
     text.parse::<Semantics>().map_err(|e| SpecError::new_err(format!("semantics '{text}': {e}")))
 }
@@ -259,10 +270,7 @@ impl PySpec {
         let p = self.paths(paths)?;
         let spec = &self.spec;
         let out = py.allow_threads(|| spec.robustness_batch(&p.data, p.steps, &sem)).map_err(eval_error)?;
-        Ok(match p.batch {
-            None => out[0].into_pyobject(py)?.into_any().unbind(),
-            Some(_) => out.into_pyarray(py).into_any().unbind(),
-        })
+        p.values(py, out)
     }
 
     /// `(ρ, ∂ρ/∂paths)`: ρ as `robustness` returns it, and the gradient with the
@@ -286,11 +294,7 @@ impl PySpec {
             Some(b) => vec![b, p.steps, p.dim],
         };
         let grads = grads.into_pyarray(py).reshape(shape)?;
-        let rho = match p.batch {
-            None => rho[0].into_pyobject(py)?.into_any().unbind(),
-            Some(_) => rho.into_pyarray(py).into_any().unbind(),
-        };
-        Ok((rho, grads))
+        Ok((p.values(py, rho)?, grads))
     }
 }
 

@@ -186,13 +186,14 @@ pub fn save_bar_chart(rows: &[BarRow], out: &Path, force: bool) -> Result<()> {
 /// One run's spec scores: `(environment steps, score)` in order, and whether the run
 /// may have stopped early at its target (`schrl train`'s runs), so its last value holds
 /// to the end.
-struct Curve {
-    points: Vec<(f64, f64)>,
+pub(crate) struct Curve {
+    /// `(environment steps, score)`, in order.
+    pub(crate) points: Vec<(f64, f64)>,
     holds: bool,
 }
 
-/// The spec scores of the run in `dir`.
-fn scores(dir: &Path) -> Result<Curve> {
+/// The spec scores of the run in `dir` (none for a run logged before scores were).
+pub(crate) fn scores(dir: &Path) -> Result<Curve> {
     let manifest = read_json(&dir.join(schrl::store::MANIFEST))?;
     // SCHRL and HTLTL spend their first steps on the general controller, which has no
     // spec score; their joint iterations count from its budget on.
@@ -226,9 +227,6 @@ fn scores(dir: &Path) -> Result<Curve> {
         if let Some(score) = v["score"].as_f64() {
             out.push((offset + steps, score));
         }
-    }
-    if out.is_empty() {
-        bail!("{}: no spec scores (runs trained before the score was logged have none)", path.display());
     }
     Ok(Curve { points: out, holds: manifest["kind"] == "joint" })
 }
@@ -299,6 +297,12 @@ pub fn save_curves(runs: &[CurveRun], bins: usize, out: &Path, force: bool) -> R
     let mut cells: Vec<((String, String), Vec<Curve>)> = vec![];
     for CurveRun { task, method, dir } in runs {
         let points = scores(dir)?;
+        if points.points.is_empty() {
+            bail!(
+                "{}: no spec scores (runs trained before the score was logged have none)",
+                dir.join("metrics.jsonl").display()
+            );
+        }
         let key = (task.to_string(), method.to_string());
         match cells.iter_mut().find(|(k, _)| *k == key) {
             Some((_, runs)) => runs.push(points),

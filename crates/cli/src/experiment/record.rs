@@ -66,19 +66,10 @@ pub fn metrics_of(output: &str) -> BTreeMap<String, f64> {
 }
 
 /// The mean spec score of a run's training episodes logged in its last `window`
-/// environment steps (`metrics.jsonl` lines with `env_steps` and `score`): where a
-/// training curve ends. `None` when the log has no scores.
+/// environment steps (the points `schrl plot curves` draws): where a training curve
+/// ends. `None` when the log has no scores.
 pub fn final_score(run: &Path, window: f64) -> Result<Option<f64>> {
-    let path = run.join("metrics.jsonl");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let mut points = Vec::new();
-    for line in text.lines().filter(|l| !l.trim().is_empty()) {
-        let v: serde_json::Value =
-            serde_json::from_str(line).with_context(|| format!("{}: a line is not JSON", path.display()))?;
-        if let (Some(steps), Some(score)) = (v["env_steps"].as_f64(), v["score"].as_f64()) {
-            points.push((steps, score));
-        }
-    }
+    let points = crate::commands::plot::scores(run)?.points;
     let Some(&(last, _)) = points.last() else { return Ok(None) };
     let tail: Vec<f64> = points.iter().filter(|(s, _)| *s > last - window).map(|(_, v)| *v).collect();
     Ok(Some(tail.iter().sum::<f64>() / tail.len() as f64))
@@ -263,12 +254,13 @@ mod tests {
     fn the_final_score_averages_the_last_window_of_steps() {
         let dir = std::env::temp_dir().join(format!("schrl-final-score-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join(schrl::store::MANIFEST), r#"{"kind":"tltl"}"#).unwrap();
         let lines = [(100_000, -3.0), (150_000, -1.0), (200_000, 1.0), (250_000, 2.0)]
             .map(|(s, v)| format!("{{\"env_steps\":{s},\"score\":{v}}}"))
             .join("\n");
-        std::fs::write(dir.join("metrics.jsonl"), lines + "\n{\"other\":1}\n").unwrap();
+        std::fs::write(dir.join("metrics.jsonl"), lines + "\n{\"env_steps\":260000}\n").unwrap();
         assert_eq!(final_score(&dir, 100_000.0).unwrap(), Some(1.5));
-        std::fs::write(dir.join("metrics.jsonl"), "{\"other\":1}\n").unwrap();
+        std::fs::write(dir.join("metrics.jsonl"), "{\"env_steps\":1}\n").unwrap();
         assert_eq!(final_score(&dir, 100_000.0).unwrap(), None);
         std::fs::remove_dir_all(&dir).unwrap();
     }
