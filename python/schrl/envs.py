@@ -3,7 +3,8 @@
 ``RobotEnv(robot, map=None)`` is one robot chasing a random goal in an open map (empty
 plane; floor for the Drone) or a named one (``"walls"``, ``"duck"``), stepped by
 schrl's Rust simulator. Registered ids: ``schrl/Point-v0``, ``schrl/Car-v0``,
-``schrl/Drone-v0`` (``gymnasium.make``), and the same ids with ``gymnasium.make_vec``
+``schrl/Drone-v0``, and ``schrl/Doggo-v0`` in a build with MuJoCo
+(``schrl.envs.MUJOCO``; ``gymnasium.make``), and the same ids with ``gymnasium.make_vec``
 give :class:`RobotVecEnv`, N environments stepped together in Rust::
 
     import gymnasium as gym
@@ -29,9 +30,10 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ._schrl import NativeEnv, NativeVecEnv
+from ._schrl import MUJOCO, NativeEnv, NativeVecEnv
 
-ROBOTS = {"Point": "point", "Car": "car", "Drone": "drone"}
+# The robots of this build: the Doggo needs a wheel built with the `mujoco` feature.
+ROBOTS = {"Point": "point", "Car": "car", "Drone": "drone", **({"Doggo": "doggo"} if MUJOCO else {})}
 _SEED_RANGE = 2**63
 
 

@@ -1,4 +1,4 @@
-//! `schrl.envs`: the native robots (Point, Car, Drone; Doggo is not in this build) as
+//! `schrl.envs`: the robots (Point, Car, Drone; Doggo with the `mujoco` feature) as
 //! environments for Python: one ([`PyEnv`]) and N stepped together in Rust
 //! ([`PyVecEnv`]). The Gymnasium classes (spaces, seeding, autoreset) are Python
 //! wrappers over these (`schrl/envs.py`).
@@ -11,7 +11,13 @@ use sim::render::{Goal, PathKind, Polyline, RobotMarker, Scene};
 use sim::{Env, EnvError, Map, Robot, VecEnv};
 
 fn env_error(e: EnvError) -> PyErr {
-    PyValueError::new_err(e.to_string())
+    match e {
+        EnvError::MujocoDisabled { robot } => PyValueError::new_err(format!(
+            "the {robot} runs on MuJoCo, which this build of schrl does not include: build the wheel \
+             with `SCHRL_PYTHON_FEATURES=mujoco bash scripts/setup-python.sh` (README, section Python)"
+        )),
+        e => PyValueError::new_err(e.to_string()),
+    }
 }
 
 /// The robot and map of a name pair: `map` by default the open one a general

@@ -9,7 +9,9 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use schrl::plan::gradient_planner::GradientPlannerConfig;
-use schrl::run::evaluate::{EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, evaluate_task, mean_std};
+use schrl::run::evaluate::{
+    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task, mean_std,
+};
 use schrl::run::joint::{JointTrainer, paths_of};
 
 fn load(ckpt: &Path) -> PyResult<JointTrainer> {
@@ -98,6 +100,12 @@ fn evaluate<'py>(
     };
     let e =
         evaluate_task(&t.task, plans, &t.control.controller(), (groups, per_group), seed).map_err(runtime)?;
+    evaluation_dict(py, &e)
+}
+
+/// An evaluation as `schrl.evaluate` returns it: `satisfaction` and `steps_to_reach`
+/// per group, their `*_mean` and `*_std`, and the failure counts.
+pub fn evaluation_dict<'py>(py: Python<'py>, e: &TaskEval) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
     let (sm, ss) = mean_std(&e.satisfaction);
     out.set_item("satisfaction", e.satisfaction.clone())?;

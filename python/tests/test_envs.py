@@ -1,21 +1,33 @@
 """schrl.envs: Gymnasium's checker passes, ids are registered, episodes are seeded,
 goals and starts can be set, frames render, the vector env steps and autoresets."""
 
+import os
+
 import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
 import schrl.envs
-from schrl.envs import RobotEnv, RobotVecEnv
+from schrl.envs import ROBOTS, RobotEnv, RobotVecEnv
 
 
-@pytest.mark.parametrize("robot", ["point", "car", "drone"])
+def test_the_doggo_is_there_exactly_when_built_with_mujoco():
+    # CI builds a second wheel with SCHRL_PYTHON_FEATURES=mujoco and says so here.
+    assert ("Doggo" in ROBOTS) == schrl.envs.MUJOCO
+    if os.environ.get("SCHRL_EXPECT_MUJOCO") == "1":
+        assert schrl.envs.MUJOCO, "the wheel was built without the mujoco feature"
+    if not schrl.envs.MUJOCO:
+        with pytest.raises(ValueError, match="mujoco"):
+            RobotEnv("doggo")
+
+
+@pytest.mark.parametrize("robot", list(ROBOTS.values()))
 def test_gymnasiums_checker_passes(robot):
     check_env(gym.make(f"schrl/{robot.title()}-v0", render_mode="rgb_array").unwrapped, skip_render_check=False)
 
 
-@pytest.mark.parametrize("name", ["Point", "Car", "Drone"])
+@pytest.mark.parametrize("name", list(ROBOTS))
 def test_ids_are_registered(name):
     env = gym.make(f"schrl/{name}-v0")
     obs, info = env.reset(seed=3)

@@ -10,22 +10,9 @@ import schrl
 from cli import schrl_cli
 
 
-@pytest.fixture(scope="module")
-def run(tmp_path_factory):
-    root = tmp_path_factory.mktemp("run")
-    cli = schrl_cli()
-    general, run = root / "general", root / "run"
-    subprocess.run([cli, "control", "train", "--robot", "point", "--steps", "20000", "--eval-episodes", "0",
-                    "--out", str(general)], check=True, capture_output=True)
-    subprocess.run([cli, "train", "--task", "seq", "--steps", "20000", "--pretrain-updates", "20",
-                    "--pretrain-candidates", "1", "--eval-groups", "0", "--controller", str(general),
-                    "--out", str(run)], check=True, capture_output=True)
-    return run
-
-
-def test_evaluate_equals_the_cli(run):
-    ours = schrl.evaluate(str(run), groups=2, per_group=20)
-    out = subprocess.run([schrl_cli(), "eval", "--ckpt", str(run), "--groups", "2", "--per-group", "20"],
+def test_evaluate_equals_the_cli(cli_run):
+    ours = schrl.evaluate(str(cli_run), groups=2, per_group=20)
+    out = subprocess.run([schrl_cli(), "eval", "--ckpt", str(cli_run), "--groups", "2", "--per-group", "20"],
                          check=True, capture_output=True, text=True).stdout
     line = next(l for l in out.splitlines() if l.startswith("satisfaction:"))
     mean, std = (float(x) for x in line.split(":")[1].split("±"))
@@ -36,8 +23,8 @@ def test_evaluate_equals_the_cli(run):
     assert f"{ours['collisions']} collisions" in failures and f"{ours['timeouts']} time-outs" in failures
 
 
-def test_plans_start_at_the_start_and_are_deterministic(run):
-    planner = schrl.load_planner(str(run))
+def test_plans_start_at_the_start_and_are_deterministic(cli_run):
+    planner = schrl.load_planner(str(cli_run))
     assert planner.task == "seq" and planner.robot == "point"
     start = [1.5, -1.5]
     path = planner.plan(start)
@@ -47,6 +34,6 @@ def test_plans_start_at_the_start_and_are_deterministic(run):
     with pytest.raises(ValueError, match="expected 2 finite numbers"):
         planner.plan([0.0])
     with pytest.raises(ValueError, match="not one of network"):
-        schrl.evaluate(str(run), planner="mip")
+        schrl.evaluate(str(cli_run), planner="mip")
     with pytest.raises(ValueError):
-        schrl.load_planner(str(run / "nowhere"))
+        schrl.load_planner(str(cli_run / "nowhere"))

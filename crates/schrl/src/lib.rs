@@ -15,6 +15,9 @@
 //! * [`baseline`] — the paper's baselines: HTLTL (SCHRL without the Lagrange term), TLTL
 //!   (a flat PPO policy rewarded by the spec's robustness), CRM (reward machines on TD3).
 //! * [`store`] — run directories: manifest, atomic checkpoints, lock, metrics log.
+//! * [`train`] — a task trained end to end into a run directory (controller,
+//!   pre-training, joint phase, checkpoints, evaluation), watched through a progress
+//!   hook: what `schrl train` and Python's `schrl.train` call.
 
 #![warn(missing_docs)]
 
@@ -25,3 +28,4 @@ pub mod plan;
 pub mod run;
 pub mod store;
 pub mod task;
+pub mod train;

@@ -20,7 +20,7 @@ use serde::de::DeserializeOwned;
 use sim::Robot;
 use sim::render::{ChartPanel, Series};
 
-use super::train::{draw, print_eval};
+use super::train::print_eval;
 
 /// Subcommands of `schrl baseline`.
 #[derive(clap::Subcommand, Debug)]
@@ -465,7 +465,7 @@ fn train_flat<B: FlatBaseline>(args: &TrainArgs) -> Result<()> {
     if groups > 0 {
         let e = trainer.evaluate((groups, EVAL_PER_GROUP), EVAL_SEED)?;
         let png = out.join("episodes.png");
-        draw(&task, &e, &png, true)?;
+        e.save_picture(&task, &png, true)?;
         println!("wrote {}", png.display());
         print_eval(&e);
     }
@@ -551,7 +551,7 @@ fn eval(args: EvalArgs) -> Result<()> {
     };
     print_eval(&e);
     if let Some(out) = &args.out {
-        draw(&task, &e, out, args.force)?;
+        e.save_picture(&task, out, args.force)?;
         println!("wrote {}", out.display());
     }
     Ok(())

@@ -337,11 +337,7 @@ pub struct SampleArgs {
 }
 
 pub(crate) fn parse_method(s: &str) -> Result<Method, String> {
-    match s {
-        "cpg" => Ok(Method::Cpg),
-        "pg" => Ok(Method::Pg),
-        other => Err(format!("unknown method '{other}': expected cpg or pg")),
-    }
+    s.parse()
 }
 
 /// Runs `schrl plan ...`.

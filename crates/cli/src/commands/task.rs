@@ -2,32 +2,15 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Result, bail};
-use schrl::task::{Task, TaskKind};
+use anyhow::Result;
+use schrl::task::Task;
 use sim::Robot;
 
 /// The task a `--task` flag names: a task file (`.toml`), whose robot it names, or a
 /// built-in task name for `robot` (default: point). A `--robot` that contradicts the
 /// file is refused.
 pub fn resolve(robot: Option<Robot>, task: &str) -> Result<Task> {
-    let t = if task.ends_with(".toml") {
-        Task::from_file(std::path::Path::new(task))?
-    } else {
-        let kind: TaskKind = task
-            .parse()
-            .map_err(|e: String| anyhow::anyhow!("--task: {e}, or a task file ending in .toml"))?;
-        Task::builtin(robot.unwrap_or(Robot::Point).name(), kind)?
-    };
-    if let Some(r) = robot
-        && t.robot != r
-    {
-        bail!(
-            "--robot {r}: task '{}' ({task}) is for the {}; drop --robot or pick a task for the {r}",
-            t.name,
-            t.robot
-        );
-    }
-    Ok(t)
+    Task::resolve(robot, task).map_err(|e| anyhow::anyhow!("--task {e}"))
 }
 
 /// Whether `--task` (with `--robot`) on a resumed run names a task other than the

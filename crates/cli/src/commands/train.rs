@@ -1,25 +1,21 @@
 //! `schrl train` and `schrl eval`: joint hierarchical training of a task, and its
 //! evaluation on what the robot actually does.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use schrl::control::{ControlConfig, ControlTrainer};
-use schrl::plan::cpg::{CpgConfig, Method};
+use schrl::plan::cpg::Method;
 use schrl::plan::gradient_planner::GradientPlannerConfig;
 use schrl::plan::planner::PlannerKind;
-use schrl::plan::pretrain::{PretrainConfig, pretrain};
 use schrl::run::RunError;
 use schrl::run::evaluate::{
-    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, RunRecord, TaskEval, evaluate_task, evaluate_task_with,
-    mean_std,
+    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, RunRecord, TaskEval, evaluate_task_with, mean_std,
 };
-use schrl::run::joint::{JointConfig, JointMetrics, JointRunSettings, JointTrainer};
-use schrl::store::{self, Existing, JsonLines, MetricsLog, RunKind, RunWriter};
-use schrl::task::Task;
+use schrl::run::joint::{JointRunSettings, SettingError};
+use schrl::store::{self, JsonLines, RunKind};
+use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watcher};
 use sim::Robot;
-use sim::render::{ChartPanel, PathKind, Polyline, RobotMarker, Scene, Series};
 use stl::Semantics;
 
 /// Arguments of `schrl train`. Flags left out take the default shown; with
@@ -136,64 +132,47 @@ impl TrainArgs {
         }
     }
 
-    /// The settings of a new run: the flags given, defaults for the rest.
+    /// The settings of a new run: the flags given, the library's defaults for the rest.
     fn settings(&self) -> Result<JointRunSettings> {
         let Some(task_arg) = &self.task else { bail!("--task is required for a new run") };
         let task = super::task::resolve(self.robot, task_arg)?;
-        let robot = task.robot;
-        let goal_margin = match self.goal_margin {
-            Some(m) => m,
-            None => sim::make_env(robot, task.map.clone())?.reach_radius(),
-        };
-        let defaults = JointConfig::default();
-        let joint = JointConfig {
-            plan_batch: self.plan_batch.unwrap_or(defaults.plan_batch),
-            goal_margin,
-            safe_margin: self.safe_margin.unwrap_or(DEFAULT_SAFE_MARGIN),
-            runs_per_start: self.runs_per_start.unwrap_or(defaults.runs_per_start),
-            control_weight: self.control_weight.unwrap_or(defaults.control_weight),
-            length_weight: self.length_weight.unwrap_or(defaults.length_weight),
-            freeze_planner: self.freeze_planner,
-            freeze_controller: self.freeze_controller,
-        };
-        let cpg_defaults = CpgConfig::default();
-        let seed = self.seed.unwrap_or(0);
-        let cpg = CpgConfig {
-            seed,
-            semantics: self.semantics.unwrap_or(cpg_defaults.semantics),
-            method: self.method.unwrap_or(cpg_defaults.method),
-            pg_weight: self.pg_weight.unwrap_or(cpg_defaults.pg_weight),
-            lambda_lr: self.lambda_lr.unwrap_or(cpg_defaults.lambda_lr),
-            planner: self.planner.unwrap_or(cpg_defaults.planner),
-            ..cpg_defaults
-        };
-        let pre = PretrainConfig::default();
-        let pretrain = PretrainConfig {
-            updates: self.pretrain_updates.unwrap_or(pre.updates),
-            candidates: self.pretrain_candidates.unwrap_or(pre.candidates),
-            length_weight: self.pretrain_length_weight.unwrap_or(pre.length_weight),
-        };
-        let s = JointRunSettings {
-            robot,
-            task_toml: task.toml.clone(),
-            task_spec: task.spec.clone(),
-            seed,
-            steps: self.steps.unwrap_or(DEFAULT_STEPS),
-            target: self.target.unwrap_or(DEFAULT_TARGET),
-            controller: self.controller.clone(),
-            joint,
-            cpg,
-            pretrain,
-            eval_groups: self.eval_groups.unwrap_or(EVAL_GROUPS),
-            save_every: self.save_every.unwrap_or(DEFAULT_SAVE_EVERY),
-        };
-        check_settings(&s)?;
+        let mut s = JointRunSettings::for_task(&task, self.seed.unwrap_or(0))?;
+        fn set<T>(slot: &mut T, flag: Option<T>) {
+            if let Some(v) = flag {
+                *slot = v;
+            }
+        }
+        set(&mut s.steps, self.steps);
+        set(&mut s.target, self.target);
+        s.controller.clone_from(&self.controller);
+        let j = &mut s.joint;
+        set(&mut j.plan_batch, self.plan_batch);
+        set(&mut j.goal_margin, self.goal_margin);
+        set(&mut j.safe_margin, self.safe_margin);
+        set(&mut j.runs_per_start, self.runs_per_start);
+        set(&mut j.control_weight, self.control_weight);
+        set(&mut j.length_weight, self.length_weight);
+        j.freeze_planner = self.freeze_planner;
+        j.freeze_controller = self.freeze_controller;
+        let c = &mut s.cpg;
+        set(&mut c.semantics, self.semantics);
+        set(&mut c.method, self.method);
+        set(&mut c.pg_weight, self.pg_weight);
+        set(&mut c.lambda_lr, self.lambda_lr);
+        set(&mut c.planner, self.planner);
+        let p = &mut s.pretrain;
+        set(&mut p.updates, self.pretrain_updates);
+        set(&mut p.candidates, self.pretrain_candidates);
+        set(&mut p.length_weight, self.pretrain_length_weight);
+        set(&mut s.eval_groups, self.eval_groups);
+        set(&mut s.save_every, self.save_every);
+        s.validate().map_err(flag_error)?;
         Ok(s)
     }
 
-    /// The saved settings of a resumed run, with the flags that may change applied;
-    /// any other flag given with a different value is refused by name.
-    fn resumed(&self, saved: &JointRunSettings) -> Result<JointRunSettings> {
+    /// Refuses flags given with a value other than the resumed run's saved one, naming
+    /// them (the budget, target, evaluation and checkpoint interval may change).
+    fn refuse_resume_conflicts(&self, saved: &JointRunSettings) -> Result<()> {
         use super::differs;
         let task_differs = super::task::differs_from_saved(
             self.robot,
@@ -228,63 +207,13 @@ impl TrainArgs {
                 ("--goal-margin", differs(&self.goal_margin, &saved.joint.goal_margin)),
                 ("--safe-margin", differs(&self.safe_margin, &saved.joint.safe_margin)),
             ],
-        )?;
-        let s = JointRunSettings {
-            steps: self.steps.unwrap_or(saved.steps),
-            target: self.target.unwrap_or(saved.target),
-            eval_groups: self.eval_groups.unwrap_or(saved.eval_groups),
-            save_every: self.save_every.unwrap_or(saved.save_every),
-            ..saved.clone()
-        };
-        check_settings(&s)?;
-        Ok(s)
+        )
     }
 }
 
-/// Joint-training steps when `--steps` is not given.
-const DEFAULT_STEPS: usize = 3_000_000;
-/// Early-stop satisfaction when `--target` is not given.
-const DEFAULT_TARGET: f64 = 0.97;
-/// Iterations between checkpoints when `--save-every` is not given.
-const DEFAULT_SAVE_EVERY: usize = 50;
-/// The planner's extra clearance when `--safe-margin` is not given: one Point radius
-/// (README, *Joint training (Algorithm 1) and results*).
-const DEFAULT_SAFE_MARGIN: f64 = 0.1;
-
-fn check_settings(s: &JointRunSettings) -> Result<()> {
-    if !(0.0..=1.0).contains(&s.target) {
-        bail!("--target must be a fraction in [0, 1], got {}", s.target);
-    }
-    if s.save_every == 0 {
-        bail!("--save-every must be at least 1");
-    }
-    if s.joint.plan_batch == 0 {
-        bail!("--plan-batch must be at least 1");
-    }
-    let per_start = s.joint.runs_per_start;
-    if per_start == 0 || !s.joint.plan_batch.is_multiple_of(per_start) {
-        bail!(
-            "--runs-per-start must divide --plan-batch ({}) into whole groups, got {per_start}",
-            s.joint.plan_batch
-        );
-    }
-    for (flag, w) in
-        [("--control-weight", s.joint.control_weight), ("--length-weight", s.joint.length_weight)]
-    {
-        if !(w >= 0.0 && w.is_finite()) {
-            bail!("{flag} must be a non-negative number, got {w}");
-        }
-    }
-    for (flag, metres) in [("--goal-margin", s.joint.goal_margin), ("--safe-margin", s.joint.safe_margin)] {
-        if !(metres >= 0.0 && metres.is_finite()) {
-            bail!("{flag} must be a non-negative number of metres, got {metres}");
-        }
-    }
-    s.pretrain
-        .validate()
-        .map_err(|e| anyhow::anyhow!("--{}", e.replace("pretrain.", "pretrain-").replace('_', "-")))?;
-    s.cpg.validate().map_err(|e| anyhow::anyhow!("{}", super::plan::cpg_flag(&e)))?;
-    Ok(())
+/// A setting out of range, named by its flag.
+fn flag_error(e: SettingError) -> anyhow::Error {
+    anyhow::anyhow!("--{} {}", e.name.replace('_', "-"), e.message)
 }
 
 /// Arguments of `schrl eval`.
@@ -342,209 +271,133 @@ enum PlannerChoice {
     Mip,
 }
 
-fn bar(len: u64, what: &str) -> Result<ProgressBar> {
+fn bar(len: u64, what: &str) -> ProgressBar {
     let b = ProgressBar::new(len);
-    b.set_style(ProgressStyle::with_template(&format!(
-        "{what:>10} {{bar:40}} {{percent}}% {{elapsed_precise}} {{msg}}"
-    ))?);
-    Ok(b)
+    let template = format!("{what:>10} {{bar:40}} {{percent}}% {{elapsed_precise}} {{msg}}");
+    b.set_style(ProgressStyle::with_template(&template).expect("a valid template"));
+    b
 }
 
-/// The general controller for `robot` in `dir`: reused when a finished one is there
-/// (a resumed run), else trained there with a progress bar.
-fn general_controller(robot: Robot, seed: u64, dir: &Path) -> Result<ControlTrainer> {
-    let mut cfg = ControlConfig::for_robot(robot);
-    cfg.seed = seed;
-    if let Ok(t) = store::controller::load(dir)
-        && t.config == cfg
-        && t.finished()
-    {
-        return Ok(t);
+/// `schrl train`'s view of a run: one progress bar per stage, notes on stderr, and
+/// Ctrl-C as the request to stop.
+#[derive(Default)]
+struct Bars {
+    /// The stage shown and its bar.
+    current: Option<(&'static str, ProgressBar)>,
+}
+
+impl Bars {
+    /// The bar of `stage`, replacing the previous stage's.
+    fn stage(&mut self, stage: &'static str, len: u64) -> &ProgressBar {
+        if self.current.as_ref().is_none_or(|(s, _)| *s != stage) {
+            self.clear();
+            self.current = Some((stage, bar(len, stage)));
+        }
+        let b = &self.current.as_ref().expect("set above").1;
+        b.set_length(len);
+        b
     }
-    let mut run =
-        RunWriter::create(dir, RunKind::Controller, &cfg, Existing::Replace).map_err(super::store_error)?;
-    let mut t = ControlTrainer::new(cfg)?;
-    let b = bar(t.total_updates() as u64, "controller")?;
-    while !t.finished() {
-        let m = t.train_update()?;
-        b.set_position(m.update as u64);
-        b.set_message(format!("success {}", m.success_rate.map_or("-".into(), |s| format!("{s:.2}"))));
+
+    fn clear(&mut self) {
+        if let Some((_, b)) = self.current.take() {
+            b.finish_and_clear();
+        }
     }
-    b.finish_and_clear();
-    run.save(|f| store::controller::save_into(f, &t))?;
-    Ok(t)
+}
+
+impl Watcher for Bars {
+    fn progress(&mut self, p: Progress<'_>) {
+        match p {
+            Progress::Controller { update, total, success_rate } => {
+                let b = self.stage("controller", total as u64);
+                b.set_position(update as u64);
+                b.set_message(format!("success {}", success_rate.map_or("-".into(), |s| format!("{s:.2}"))));
+            }
+            Progress::Pretrain(p) => {
+                let b = self.stage("planner", p.total as u64);
+                b.set_position(p.done as u64);
+                b.set_message(format!("candidate {}: plan satisfaction {:.2}", p.candidate, p.satisfaction));
+            }
+            Progress::Joint { metrics, total_steps, satisfaction, plan_satisfaction } => {
+                let b = self.stage("joint", total_steps as u64);
+                b.set_position(metrics.env_steps.min(total_steps) as u64);
+                b.set_message(format!(
+                    "satisfaction {satisfaction:.2} (plans {plan_satisfaction:.2}) λ {:.2}",
+                    metrics.lambda
+                ));
+            }
+        }
+    }
+
+    fn note(&mut self, note: &str) {
+        match &self.current {
+            Some((_, b)) => b.suspend(|| eprintln!("{note}")),
+            None => eprintln!("{note}"),
+        }
+    }
+
+    fn stop_requested(&mut self) -> bool {
+        crate::interrupt::requested()
+    }
 }
 
 /// Runs `schrl train`.
 pub fn train(args: TrainArgs) -> Result<()> {
-    let start = std::time::Instant::now();
     let out = args.run.out.clone();
-    let (mut run, settings, saved) = if args.run.resume {
-        let (mut run, ckpt) = RunWriter::resume(&out, RunKind::Joint).map_err(super::store_error)?;
-        let settings = args.resumed(&run.settings().map_err(super::store_error)?)?;
-        run.set_settings(&settings).map_err(super::store_error)?;
-        let saved = if ckpt.has_files() { Some(store::joint::load_from(&ckpt)?) } else { None };
-        (run, settings, saved)
+    let session = if args.run.resume {
+        let mut session = RunSession::resume(&out).map_err(train_error)?;
+        args.refuse_resume_conflicts(session.settings())?;
+        session
+            .change(ResumeChanges {
+                steps: args.steps,
+                target: args.target,
+                eval_groups: args.eval_groups,
+                save_every: args.save_every,
+            })
+            .map_err(train_error)?;
+        session
     } else {
         let settings = args.settings()?;
-        for w in settings.task()?.warnings() {
-            eprintln!("warning: {w}");
-        }
-        let run = RunWriter::create(&out, RunKind::Joint, &settings, args.run.existing())
-            .map_err(super::store_error)?;
-        (run, settings, None)
+        RunSession::create(&out, settings, args.run.existing()).map_err(train_error)?
     };
     crate::interrupt::install();
-    // Before the first checkpoint a resumed run starts again from its settings, which
-    // repeats the same work exactly (a finished general controller is reused).
-    let resumed_from = saved.as_ref().map(|t| t.iterations);
-    let mut trainer = match saved {
-        Some(t) => t,
-        None => start_run(&settings, &mut run)?,
-    };
-    let done = trainer.iterations;
-    let (mut log, mut history) =
-        MetricsLog::open(&run, resumed_from.is_some(), |m: &JointMetrics| m.iteration <= done)
-            .map_err(super::store_error)?;
-    let b = bar(settings.steps as u64, "joint")?;
-    b.set_position(trainer.env_steps as u64);
-    let mut interrupted = false;
-    while trainer.env_steps < settings.steps {
-        let m = trainer.iterate()?;
-        log.append(&m)?;
-        b.set_position(m.env_steps.min(settings.steps) as u64);
-        history.push(m);
-        let recent = &history[history.len().saturating_sub(20)..];
-        let sat = recent.iter().map(|m| m.satisfaction).sum::<f64>() / recent.len() as f64;
-        let plan = recent.iter().map(|m| m.plan_satisfaction).sum::<f64>() / recent.len() as f64;
-        b.set_message(format!(
-            "satisfaction {sat:.2} (plans {plan:.2}) λ {:.2}",
-            trainer.plan.lagrangian().lambda
-        ));
-        if trainer.iterations % settings.save_every == 0 {
-            run.save(|f| store::joint::save_into(f, &trainer))?;
-        }
-        if recent.len() == 20 && sat >= settings.target {
-            break;
-        }
-        if crate::interrupt::requested() {
-            interrupted = true;
-            break;
-        }
+    let mut bars = Bars::default();
+    let trained = session.train(&mut bars);
+    bars.clear();
+    let trained = trained.map_err(train_error)?;
+    let t = &trained.trainer;
+    if trained.stop == Stop::Requested {
+        return Err(crate::interrupt::stopped(&out, format!("iteration {}", t.iterations)));
     }
-    b.finish_and_clear();
-    run.save(|f| store::joint::save_into(f, &trainer))?;
-    if interrupted {
-        return Err(crate::interrupt::stopped(&out, format!("iteration {}", trainer.iterations)));
-    }
-    save_curve(&history, &out.join("training_curve.png"))?;
     println!(
         "trained {} on {} for {} iterations, {} environment steps, in {:.1} s; run in {}",
-        trainer.task.robot,
-        trainer.task.name,
-        trainer.iterations,
-        trainer.env_steps,
-        start.elapsed().as_secs_f64(),
+        t.task.robot,
+        t.task.name,
+        t.iterations,
+        t.env_steps,
+        trained.seconds,
         out.display()
     );
-    if settings.eval_groups > 0 {
-        let eval = evaluate_task(
-            &trainer.task,
-            Plans::Mean(trainer.plan.planner()),
-            &trainer.control.controller(),
-            (settings.eval_groups, EVAL_PER_GROUP),
-            EVAL_SEED,
-        )?;
-        let png = out.join("episodes.png");
-        draw(&trainer.task, &eval, &png, true)?;
-        println!("wrote {}", png.display());
-        print_eval(&eval);
+    if let Some(eval) = &trained.evaluation {
+        if let Some(png) = trained.pictures.last() {
+            println!("wrote {}", png.display());
+        }
+        print_eval(eval);
     }
     Ok(())
 }
 
-/// The trainer of a run that has no checkpoint yet: the warm-start controller, then
-/// planner pre-training; saves the result as the run's first checkpoint.
-fn start_run(settings: &JointRunSettings, run: &mut RunWriter) -> Result<JointTrainer> {
-    let task = settings.task()?;
-    let control = match &settings.controller {
-        Some(dir) => {
-            let c = store::controller::load(dir).map_err(super::store_error)?;
-            if c.config.robot != settings.robot {
-                bail!(
-                    "--controller {}: a {} controller, not {}",
-                    dir.display(),
-                    c.config.robot,
-                    settings.robot
-                );
-            }
-            c
+/// A training error as the command line says it: settings by their flags, store
+/// errors with the flag that would help.
+fn train_error(e: TrainError) -> anyhow::Error {
+    match e {
+        TrainError::Setting(e) => flag_error(e),
+        TrainError::Store(e) => super::store_error(e),
+        TrainError::ControllerRobot { dir, found, wanted } => {
+            anyhow::anyhow!("--controller {}: a {found} controller, not {wanted}", dir.display())
         }
-        None => general_controller(settings.robot, settings.seed, &run.dir().join("general"))?,
-    };
-    let mut t = JointTrainer::new(task, settings.joint.clone(), settings.cpg, control)?;
-    let b = bar((settings.pretrain.updates * settings.pretrain.candidates) as u64, "planner")?;
-    let kept = pretrain(&mut t, &settings.pretrain, &mut |p| {
-        b.set_length(p.total as u64);
-        b.set_position(p.done as u64);
-        b.set_message(format!("candidate {}: plan satisfaction {:.2}", p.candidate, p.satisfaction));
-    })?;
-    b.finish_and_clear();
-    if let Some(k) = kept {
-        if k.retried_without_safe_margin {
-            eprintln!(
-                "planner: no candidate met the spec with {} m more clearance; planning with the task's own",
-                settings.joint.safe_margin
-            );
-        }
-        eprintln!(
-            "planner: kept mean paths satisfying from {:.3} of starts, {:.2} m long",
-            k.satisfaction, k.length
-        );
+        e => e.into(),
     }
-    run.save(|f| store::joint::save_into(f, &t))?;
-    Ok(t)
-}
-
-/// Satisfaction of executed runs and of planned paths (0–1) on top, the mean
-/// low-level reward r_l in the middle, λ below; x: environment steps. Each a moving
-/// average over 20 iterations, so the curve shows the trend.
-fn save_curve(history: &[JointMetrics], out: &Path) -> Result<()> {
-    let series = |label: &str, f: &dyn Fn(&JointMetrics) -> f64| Series {
-        label: label.into(),
-        points: (0..history.len())
-            .map(|i| {
-                let w = &history[i.saturating_sub(19)..=i];
-                (history[i].env_steps as f64, w.iter().map(f).sum::<f64>() / w.len() as f64)
-            })
-            .collect(),
-        band: vec![],
-    };
-    let panels = [
-        ChartPanel {
-            series: vec![
-                series("executed runs", &|m| m.satisfaction),
-                series("planned paths", &|m| m.plan_satisfaction),
-            ],
-            y_range: Some((0.0, 1.0)),
-            y_label: "satisfaction".into(),
-            reference: None,
-        },
-        ChartPanel {
-            series: vec![series("r_l (−steps/limit; failures below −1)", &|m| m.low_level_reward)],
-            y_range: None,
-            y_label: "low-level reward".into(),
-            reference: None,
-        },
-        ChartPanel {
-            series: vec![series("λ (Lagrange multiplier of ρ ≥ ε)", &|m| m.lambda)],
-            y_range: None,
-            y_label: "λ".into(),
-            reference: None,
-        },
-    ];
-    sim::render::save_chart(&panels, "environment steps", out, true)?;
-    Ok(())
 }
 
 pub(crate) fn print_eval(e: &TaskEval) {
@@ -560,28 +413,6 @@ pub(crate) fn print_eval(e: &TaskEval) {
         "failures: {} collisions, {} falls, {} time-outs, {} entered a region to avoid",
         e.collisions, e.falls, e.timeouts, e.entered
     );
-}
-
-pub(crate) fn draw(task: &Task, e: &TaskEval, out: &Path, force: bool) -> Result<()> {
-    let mut scene = Scene::new(task.map.clone());
-    scene.goals = task.picture_goals();
-    let radius = sim::make_env(task.robot, task.map.clone())?.radius();
-    for run in e.examples.iter().take(4) {
-        // A flat policy (TLTL) plans nothing.
-        if !run.planned.is_empty() {
-            scene.paths.push(Polyline { points: run.planned.clone(), kind: PathKind::Planned });
-        }
-        scene.paths.push(Polyline { points: run.trajectory.clone(), kind: PathKind::Executed });
-    }
-    // The first run's pose at eight moments: a Car drives forwards or backwards and
-    // turns on the spot, which the trace alone does not show.
-    if let Some(run) = e.examples.first() {
-        let every = (run.trajectory.len() / 8).max(1);
-        let poses = run.trajectory.iter().zip(&run.headings).skip(every).step_by(every);
-        scene.robots.extend(poses.map(|(p, &heading)| RobotMarker { position: p.clone(), heading, radius }));
-    }
-    sim::render::save(&scene, out, force)?;
-    Ok(())
 }
 
 /// Runs `schrl eval`.
@@ -646,7 +477,7 @@ pub fn eval(args: EvalArgs) -> Result<()> {
         println!("wrote {} runs to {}", args.groups * args.per_group, path.display());
     }
     if let Some(out) = &args.out {
-        draw(&t.task, &e, out, args.force)?;
+        e.save_picture(&t.task, out, args.force)?;
         println!("wrote {}", out.display());
     }
     Ok(())

@@ -58,9 +58,23 @@ pub enum Method {
     Pg,
 }
 
+impl std::str::FromStr for Method {
+    type Err = String;
+
+    /// `cpg` or `pg`.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "cpg" => Ok(Method::Cpg),
+            "pg" => Ok(Method::Pg),
+            other => Err(format!("unknown method '{other}': expected cpg or pg")),
+        }
+    }
+}
+
 /// The low-level reward `r_l(τ)` of each planned path: from the controller in joint
-/// training, or a stand-in when the planner trains alone.
-pub trait ControlReward {
+/// training, or a stand-in when the planner trains alone. `Send`: a run may train on
+/// another thread (Python's `schrl.train` releases the GIL).
+pub trait ControlReward: Send {
     /// One reward per path of `paths` (`batch × (steps+1) × dim`, row-major).
     fn reward(&self, paths: &[f64], steps: usize, dim: usize) -> Vec<f64>;
 

@@ -65,6 +65,34 @@ pub(crate) struct GroupTally {
 }
 
 impl TaskEval {
+    /// Draws the first four example runs (planned waypoints and executed trajectory)
+    /// on the task's map, with the first run's pose at eight moments (a Car drives
+    /// forwards or backwards and turns on the spot, which a trace alone does not
+    /// show), to `out` (PNG or SVG).
+    pub fn save_picture(&self, task: &Task, out: &std::path::Path, overwrite: bool) -> Result<(), RunError> {
+        use sim::render::{PathKind, Polyline, RobotMarker, Scene};
+        let mut scene = Scene::new(task.map.clone());
+        scene.goals = task.picture_goals();
+        let radius = sim::make_env(task.robot, task.map.clone())?.radius();
+        for run in self.examples.iter().take(4) {
+            // A flat policy (TLTL) plans nothing.
+            if !run.planned.is_empty() {
+                scene.paths.push(Polyline { points: run.planned.clone(), kind: PathKind::Planned });
+            }
+            scene.paths.push(Polyline { points: run.trajectory.clone(), kind: PathKind::Executed });
+        }
+        if let Some(run) = self.examples.first() {
+            let every = (run.trajectory.len() / 8).max(1);
+            let poses = run.trajectory.iter().zip(&run.headings).skip(every).step_by(every);
+            scene.robots.extend(poses.map(|(p, &heading)| RobotMarker {
+                position: p.clone(),
+                heading,
+                radius,
+            }));
+        }
+        sim::render::save(&scene, out, overwrite).map_err(RunError::from)
+    }
+
     /// No groups yet.
     pub(crate) fn empty() -> Self {
         Self {

@@ -132,11 +132,106 @@ pub struct JointRunSettings {
     pub save_every: usize,
 }
 
+/// Joint-training steps of a run by default.
+pub const DEFAULT_STEPS: usize = 3_000_000;
+/// Satisfaction over the last 20 iterations at which a run stops early by default.
+pub const DEFAULT_TARGET: f64 = 0.97;
+/// Iterations between checkpoints by default.
+pub const DEFAULT_SAVE_EVERY: usize = 50;
+/// The planner's extra clearance by default: one Point radius (README, *Joint training
+/// (Algorithm 1) and results*).
+pub const DEFAULT_SAFE_MARGIN: f64 = 0.1;
+
+/// A run setting out of range. `name` is the setting as a user gives it: the
+/// `schrl train` flag with `_` for `-` (`plan_batch` for `--plan-batch`), which is also
+/// the keyword of Python's `schrl.train`.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{name} {message}")]
+pub struct SettingError {
+    /// The setting's name.
+    pub name: String,
+    /// What is wrong with its value.
+    pub message: String,
+}
+
+impl SettingError {
+    fn new(name: &str, message: String) -> Self {
+        Self { name: name.into(), message }
+    }
+
+    /// A nested config's message, `"<prefix>.<key> <message>"` (as
+    /// [`CpgConfig::validate`] and
+    /// [`crate::plan::pretrain::PretrainConfig::validate`] word them), under the
+    /// name `<name_prefix><key>`.
+    fn of_nested(message: &str, prefix: &str, name_prefix: &str) -> Self {
+        let rest = message.strip_prefix(prefix).unwrap_or(message);
+        let (key, what) = rest.split_once(' ').unwrap_or((rest, ""));
+        Self::new(&format!("{name_prefix}{}", key.trim_end_matches(':')), what.into())
+    }
+}
+
 impl JointRunSettings {
+    /// The default settings of a run of `task` from `seed`: the planner's goal discs
+    /// shrunk by the robot's reach radius, [`DEFAULT_SAFE_MARGIN`] more clearance, and
+    /// each config's own defaults.
+    pub fn for_task(task: &Task, seed: u64) -> Result<Self, RunError> {
+        let goal_margin = sim::make_env(task.robot, task.map.clone())?.reach_radius();
+        Ok(Self {
+            robot: task.robot,
+            task_toml: task.toml.clone(),
+            task_spec: task.spec.clone(),
+            seed,
+            steps: DEFAULT_STEPS,
+            target: DEFAULT_TARGET,
+            controller: None,
+            joint: JointConfig { goal_margin, safe_margin: DEFAULT_SAFE_MARGIN, ..JointConfig::default() },
+            cpg: CpgConfig { seed, ..CpgConfig::default() },
+            pretrain: crate::plan::pretrain::PretrainConfig::default(),
+            eval_groups: crate::run::evaluate::EVAL_GROUPS,
+            save_every: DEFAULT_SAVE_EVERY,
+        })
+    }
+
     /// The task these settings train on.
     pub fn task(&self) -> Result<Task, crate::task::TaskError> {
         let here = std::path::Path::new("settings");
         Task::from_texts(here, &self.task_toml, here, &self.task_spec)
+    }
+
+    /// Checks every setting, naming the first one out of range.
+    pub fn validate(&self) -> Result<(), SettingError> {
+        let bad = SettingError::new;
+        if !(0.0..=1.0).contains(&self.target) {
+            return Err(bad("target", format!("must be a fraction in [0, 1], got {}", self.target)));
+        }
+        if self.save_every == 0 {
+            return Err(bad("save_every", "must be at least 1".into()));
+        }
+        let j = &self.joint;
+        if j.plan_batch == 0 {
+            return Err(bad("plan_batch", "must be at least 1".into()));
+        }
+        if j.runs_per_start == 0 || !j.plan_batch.is_multiple_of(j.runs_per_start) {
+            return Err(bad(
+                "runs_per_start",
+                format!(
+                    "must divide the plan batch ({}) into whole groups, got {}",
+                    j.plan_batch, j.runs_per_start
+                ),
+            ));
+        }
+        for (name, w) in [("control_weight", j.control_weight), ("length_weight", j.length_weight)] {
+            if !(w >= 0.0 && w.is_finite()) {
+                return Err(bad(name, format!("must be a non-negative number, got {w}")));
+            }
+        }
+        for (name, metres) in [("goal_margin", j.goal_margin), ("safe_margin", j.safe_margin)] {
+            if !(metres >= 0.0 && metres.is_finite()) {
+                return Err(bad(name, format!("must be a non-negative number of metres, got {metres}")));
+            }
+        }
+        self.pretrain.validate().map_err(|e| SettingError::of_nested(&e, "pretrain.", "pretrain_"))?;
+        self.cpg.validate().map_err(|e| SettingError::of_nested(&e, "cpg.", ""))
     }
 }
 

@@ -31,6 +31,9 @@ pub enum RunError {
     /// An environment refused something.
     #[error(transparent)]
     Env(#[from] sim::EnvError),
+    /// A picture could not be drawn or written.
+    #[error(transparent)]
+    Picture(#[from] sim::render::RenderError),
     /// A run could not be recorded (`schrl eval --trajectories`).
     #[error("recording a run: {0}")]
     Record(String),

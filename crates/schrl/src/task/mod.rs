@@ -240,6 +240,31 @@ impl Task {
         Task::from_texts(&toml_path, toml_text, &toml_path.with_extension("stl"), spec_text)
     }
 
+    /// The task a user names: a task file (`.toml`), whose robot it names, or a
+    /// built-in task name (`seq`, …) for `robot` (default: Point). A `robot` that
+    /// contradicts the file is refused.
+    pub fn resolve(robot: Option<Robot>, task: &str) -> Result<Task, TaskError> {
+        let t = if task.ends_with(".toml") {
+            Task::from_file(Path::new(task))?
+        } else {
+            let kind: TaskKind = task.parse().map_err(|e: String| TaskError {
+                path: PathBuf::from(task),
+                message: format!("{e}, or a task file ending in .toml"),
+            })?;
+            Task::builtin(robot.unwrap_or(Robot::Point).name(), kind)?
+        };
+        match robot {
+            Some(r) if t.robot != r => Err(TaskError {
+                path: PathBuf::from(task),
+                message: format!(
+                    "task '{}' is for the {}, not the {r}; leave the robot out or pick a task for the {r}",
+                    t.name, t.robot
+                ),
+            }),
+            _ => Ok(t),
+        }
+    }
+
     /// The Point version of `kind` (the shipped files; they are tested to load).
     pub fn point(kind: TaskKind) -> Task {
         Task::builtin("point", kind).expect("shipped Point tasks are valid (tested)")

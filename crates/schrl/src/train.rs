@@ -1,0 +1,423 @@
+//! Training a task end to end into a run directory: what `schrl train` and Python's
+//! `schrl.train` call, so both make the same run from the same settings.
+//!
+//! The stages, in order: the warm-start controller (a given `schrl control train` run,
+//! or a general controller trained into the run's `general/`, reused when finished
+//! there), pre-training of the planner on the spec (the first checkpoint), the joint
+//! phase ([`JointTrainer::iterate`], a checkpoint every `save_every` iterations and at
+//! the end, one metrics line per iteration) until the step budget or the target, then
+//! the training curve and, with `eval_groups > 0`, the evaluation of the mean plans
+//! with its picture.
+//!
+//! A caller watches through a [`Watcher`]: progress of each stage, notes worth a
+//! user's eye, and whether to stop (Ctrl-C): a stopped run saves its checkpoint first,
+//! so [`RunSession::resume`] continues it bit for bit.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::control::{ControlConfig, ControlTrainer};
+use crate::plan::pretrain::{PretrainProgress, pretrain};
+use crate::run::RunError;
+use crate::run::evaluate::{EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task};
+use crate::run::joint::{JointMetrics, JointRunSettings, JointTrainer, SettingError};
+use crate::store::{self, Existing, MetricsLog, RunKind, RunWriter, StoreError};
+
+/// Iterations the early stop and the progress figures average over.
+pub const RECENT: usize = 20;
+
+/// A problem training a run, naming its source.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// A setting is out of range.
+    #[error(transparent)]
+    Setting(#[from] SettingError),
+    /// The run directory, a checkpoint or the warm-start controller.
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// The task in the settings.
+    #[error(transparent)]
+    Task(#[from] crate::task::TaskError),
+    /// Planning, control, execution or a picture.
+    #[error(transparent)]
+    Run(#[from] RunError),
+    /// The warm-start controller drives another robot.
+    #[error("controller {dir}: a {found} controller, not {wanted}")]
+    ControllerRobot {
+        /// The controller run.
+        dir: PathBuf,
+        /// The robot it drives.
+        found: sim::Robot,
+        /// The robot of the task.
+        wanted: sim::Robot,
+    },
+}
+
+impl From<crate::control::ControlError> for TrainError {
+    fn from(e: crate::control::ControlError) -> Self {
+        Self::Run(e.into())
+    }
+}
+
+impl From<candle_core::Error> for TrainError {
+    fn from(e: candle_core::Error) -> Self {
+        Self::Run(e.into())
+    }
+}
+
+/// How far a stage has come.
+#[derive(Clone, Copy, Debug)]
+pub enum Progress<'a> {
+    /// Training the general controller: PPO updates done of `total`, and the success
+    /// rate over its last goals.
+    Controller {
+        /// Updates done.
+        update: usize,
+        /// Updates planned.
+        total: usize,
+        /// Fraction of recent goals reached (none before the first finished goal).
+        success_rate: Option<f64>,
+    },
+    /// Pre-training the planner on the spec.
+    Pretrain(PretrainProgress),
+    /// One joint iteration done.
+    Joint {
+        /// What it measured.
+        metrics: &'a JointMetrics,
+        /// The step budget.
+        total_steps: usize,
+        /// Satisfaction of the runs of the last [`RECENT`] iterations.
+        satisfaction: f64,
+        /// Satisfaction of the planned paths of the last [`RECENT`] iterations.
+        plan_satisfaction: f64,
+    },
+}
+
+/// What a caller of [`RunSession::train`] sees while it runs.
+pub trait Watcher {
+    /// A stage moved on.
+    fn progress(&mut self, progress: Progress<'_>);
+    /// Something a user should read (a task warning, which planner pre-training kept).
+    fn note(&mut self, note: &str);
+    /// Whether to stop after this iteration, saving first (polled once per iteration).
+    fn stop_requested(&mut self) -> bool {
+        false
+    }
+}
+
+/// Why the joint phase ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stop {
+    /// The step budget was spent.
+    Steps,
+    /// The last [`RECENT`] iterations' runs met the target satisfaction.
+    Target,
+    /// The watcher asked to stop; the checkpoint is saved.
+    Requested,
+}
+
+/// A finished (or stopped) training run.
+pub struct Trained {
+    /// The trainer as saved in the last checkpoint.
+    pub trainer: JointTrainer,
+    /// One entry per joint iteration, the resumed ones included.
+    pub history: Vec<JointMetrics>,
+    /// Why the joint phase ended.
+    pub stop: Stop,
+    /// Seconds this call trained (the evaluation excluded).
+    pub seconds: f64,
+    /// The evaluation of the mean plans (`eval_groups` groups of
+    /// [`EVAL_PER_GROUP`] runs, seed [`EVAL_SEED`]); `None` with `eval_groups = 0` or
+    /// when stopped.
+    pub evaluation: Option<TaskEval>,
+    /// The pictures written: the training curve, then the evaluation's runs.
+    pub pictures: Vec<PathBuf>,
+}
+
+/// The settings a resumed run may change; `None` keeps the saved value.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ResumeChanges {
+    /// The step budget.
+    pub steps: Option<usize>,
+    /// The early-stop satisfaction.
+    pub target: Option<f64>,
+    /// Evaluation groups after training.
+    pub eval_groups: Option<usize>,
+    /// Iterations between checkpoints.
+    pub save_every: Option<usize>,
+}
+
+/// A run directory ready to train: a new run, or a saved one resuming from its last
+/// checkpoint (holding the directory's lock).
+pub struct RunSession {
+    run: RunWriter,
+    settings: JointRunSettings,
+    saved: Option<JointTrainer>,
+    notes: Vec<String>,
+}
+
+impl RunSession {
+    /// A new run of `settings` in `dir`; an existing run there is refused or replaced
+    /// as `existing` says. The settings are checked first.
+    pub fn create(dir: &Path, settings: JointRunSettings, existing: Existing) -> Result<Self, TrainError> {
+        settings.validate()?;
+        let notes = settings.task()?.warnings().into_iter().map(|w| format!("warning: {w}")).collect();
+        let run = RunWriter::create(dir, RunKind::Joint, &settings, existing)?;
+        Ok(Self { run, settings, saved: None, notes })
+    }
+
+    /// The run saved in `dir`, to continue from its last checkpoint with its saved
+    /// settings (see [`RunSession::change`] for what may differ).
+    pub fn resume(dir: &Path) -> Result<Self, TrainError> {
+        let (run, ckpt) = RunWriter::resume(dir, RunKind::Joint)?;
+        let settings: JointRunSettings = run.settings()?;
+        let saved = if ckpt.has_files() { Some(store::joint::load_from(&ckpt)?) } else { None };
+        Ok(Self { run, settings, saved, notes: vec![] })
+    }
+
+    /// Changes what a resumed run may change (the rest of its settings are what its
+    /// checkpoints were made with), recording them in the run's manifest.
+    pub fn change(&mut self, c: ResumeChanges) -> Result<(), TrainError> {
+        let s = JointRunSettings {
+            steps: c.steps.unwrap_or(self.settings.steps),
+            target: c.target.unwrap_or(self.settings.target),
+            eval_groups: c.eval_groups.unwrap_or(self.settings.eval_groups),
+            save_every: c.save_every.unwrap_or(self.settings.save_every),
+            ..self.settings.clone()
+        };
+        s.validate()?;
+        self.run.set_settings(&s)?;
+        self.settings = s;
+        Ok(())
+    }
+
+    /// The run's settings.
+    pub fn settings(&self) -> &JointRunSettings {
+        &self.settings
+    }
+
+    /// The run directory.
+    pub fn dir(&self) -> &Path {
+        self.run.dir()
+    }
+
+    /// Trains the run to its budget or target (or until `watcher` asks to stop),
+    /// checkpointing as it goes; then, unless stopped, draws the training curve and
+    /// evaluates.
+    pub fn train(mut self, watcher: &mut dyn Watcher) -> Result<Trained, TrainError> {
+        let start = Instant::now();
+        for n in &self.notes {
+            watcher.note(n);
+        }
+        // Before the first checkpoint a resumed run starts again from its settings,
+        // which repeats the same work exactly (a finished general controller is reused).
+        let resumed = self.saved.is_some();
+        let mut trainer = match self.saved.take() {
+            Some(t) => t,
+            None => first_checkpoint(&self.settings, &mut self.run, watcher)?,
+        };
+        let s = &self.settings;
+        let done = trainer.iterations;
+        let (mut log, mut history) =
+            MetricsLog::open(&self.run, resumed, |m: &JointMetrics| m.iteration <= done)?;
+        let mut stop = Stop::Steps;
+        while trainer.env_steps < s.steps {
+            let m = trainer.iterate()?;
+            log.append(&m)?;
+            history.push(m);
+            let recent = &history[history.len().saturating_sub(RECENT)..];
+            let mean = |f: fn(&JointMetrics) -> f64| recent.iter().map(f).sum::<f64>() / recent.len() as f64;
+            let satisfaction = mean(|m| m.satisfaction);
+            watcher.progress(Progress::Joint {
+                metrics: history.last().expect("pushed above"),
+                total_steps: s.steps,
+                satisfaction,
+                plan_satisfaction: mean(|m| m.plan_satisfaction),
+            });
+            if trainer.iterations.is_multiple_of(s.save_every) {
+                self.run.save(|f| store::joint::save_into(f, &trainer))?;
+            }
+            if recent.len() == RECENT && satisfaction >= s.target {
+                stop = Stop::Target;
+                break;
+            }
+            if watcher.stop_requested() {
+                stop = Stop::Requested;
+                break;
+            }
+        }
+        self.run.save(|f| store::joint::save_into(f, &trainer))?;
+        let seconds = start.elapsed().as_secs_f64();
+        let mut trained = Trained { trainer, history, stop, seconds, evaluation: None, pictures: vec![] };
+        if stop == Stop::Requested {
+            return Ok(trained);
+        }
+        let curve = self.run.dir().join("training_curve.png");
+        save_curve(&trained.history, &curve)?;
+        trained.pictures.push(curve);
+        if s.eval_groups > 0 {
+            let t = &trained.trainer;
+            let eval = evaluate_task(
+                &t.task,
+                Plans::Mean(t.plan.planner()),
+                &t.control.controller(),
+                (s.eval_groups, EVAL_PER_GROUP),
+                EVAL_SEED,
+            )?;
+            let png = self.run.dir().join("episodes.png");
+            eval.save_picture(&t.task, &png, true)?;
+            trained.pictures.push(png);
+            trained.evaluation = Some(eval);
+        }
+        Ok(trained)
+    }
+}
+
+/// The trainer of a run that has no checkpoint yet: the warm-start controller, then
+/// planner pre-training; saved as the run's first checkpoint.
+fn first_checkpoint(
+    s: &JointRunSettings,
+    run: &mut RunWriter,
+    watcher: &mut dyn Watcher,
+) -> Result<JointTrainer, TrainError> {
+    let task = s.task()?;
+    let control = match &s.controller {
+        Some(dir) => {
+            let c = store::controller::load(dir)?;
+            if c.config.robot != s.robot {
+                return Err(TrainError::ControllerRobot {
+                    dir: dir.clone(),
+                    found: c.config.robot,
+                    wanted: s.robot,
+                });
+            }
+            c
+        }
+        None => general_controller(s.robot, s.seed, &run.dir().join("general"), watcher)?,
+    };
+    let mut t = JointTrainer::new(task, s.joint.clone(), s.cpg, control)?;
+    let kept = pretrain(&mut t, &s.pretrain, &mut |p| watcher.progress(Progress::Pretrain(p)))?;
+    if let Some(k) = kept {
+        if k.retried_without_safe_margin {
+            watcher.note(&format!(
+                "planner: no candidate met the spec with {} m more clearance; planning with the task's own",
+                s.joint.safe_margin
+            ));
+        }
+        watcher.note(&format!(
+            "planner: kept mean paths satisfying from {:.3} of starts, {:.2} m long",
+            k.satisfaction, k.length
+        ));
+    }
+    run.save(|f| store::joint::save_into(f, &t))?;
+    Ok(t)
+}
+
+/// The general controller for `robot` in `dir`: reused when a finished one with the
+/// same settings is there (a resumed run), else trained there.
+fn general_controller(
+    robot: sim::Robot,
+    seed: u64,
+    dir: &Path,
+    watcher: &mut dyn Watcher,
+) -> Result<ControlTrainer, TrainError> {
+    let mut cfg = ControlConfig::for_robot(robot);
+    cfg.seed = seed;
+    if let Ok(t) = store::controller::load(dir)
+        && t.config == cfg
+        && t.finished()
+    {
+        return Ok(t);
+    }
+    let mut run = RunWriter::create(dir, RunKind::Controller, &cfg, Existing::Replace)?;
+    let mut t = ControlTrainer::new(cfg)?;
+    let total = t.total_updates();
+    while !t.finished() {
+        let m = t.train_update()?;
+        watcher.progress(Progress::Controller { update: m.update, total, success_rate: m.success_rate });
+    }
+    run.save(|f| store::controller::save_into(f, &t))?;
+    Ok(t)
+}
+
+/// Satisfaction of executed runs and of planned paths (0–1) on top, the mean
+/// low-level reward r_l in the middle, λ below; x: environment steps. Each a moving
+/// average over [`RECENT`] iterations, so the curve shows the trend.
+fn save_curve(history: &[JointMetrics], out: &Path) -> Result<(), RunError> {
+    use sim::render::{ChartPanel, Series};
+    let series = |label: &str, f: &dyn Fn(&JointMetrics) -> f64| Series {
+        label: label.into(),
+        points: (0..history.len())
+            .map(|i| {
+                let w = &history[(i + 1).saturating_sub(RECENT)..=i];
+                (history[i].env_steps as f64, w.iter().map(f).sum::<f64>() / w.len() as f64)
+            })
+            .collect(),
+        band: vec![],
+    };
+    let panels = [
+        ChartPanel {
+            series: vec![
+                series("executed runs", &|m| m.satisfaction),
+                series("planned paths", &|m| m.plan_satisfaction),
+            ],
+            y_range: Some((0.0, 1.0)),
+            y_label: "satisfaction".into(),
+            reference: None,
+        },
+        ChartPanel {
+            series: vec![series("r_l (−steps/limit; failures below −1)", &|m| m.low_level_reward)],
+            y_range: None,
+            y_label: "low-level reward".into(),
+            reference: None,
+        },
+        ChartPanel {
+            series: vec![series("λ (Lagrange multiplier of ρ ≥ ε)", &|m| m.lambda)],
+            y_range: None,
+            y_label: "λ".into(),
+            reference: None,
+        },
+    ];
+    sim::render::save_chart(&panels, "environment steps", out, true)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::task::{Task, TaskKind};
+
+    fn settings() -> JointRunSettings {
+        JointRunSettings::for_task(&Task::point(TaskKind::Seq), 3).unwrap()
+    }
+
+    #[test]
+    fn defaults_are_valid_and_seed_the_planner_too() {
+        let s = settings();
+        s.validate().unwrap();
+        assert_eq!((s.seed, s.cpg.seed), (3, 3));
+        assert!(s.joint.goal_margin > 0.0, "the planner's goals shrink by the reach radius");
+    }
+
+    #[test]
+    fn a_bad_setting_is_named_as_users_give_it_and_no_run_is_created() {
+        let dir = std::env::temp_dir().join(format!("schrl-train-bad-{}", std::process::id()));
+        type Spoil = fn(&mut JointRunSettings);
+        let cases: [(Spoil, &str); 5] = [
+            (|s| s.joint.runs_per_start = 3, "runs_per_start must divide the plan batch (8)"),
+            (|s| s.target = 1.5, "target must be a fraction in [0, 1], got 1.5"),
+            (|s| s.pretrain.candidates = 0, "pretrain_candidates must be at least 1"),
+            (|s| s.cpg.lambda_lr = -1.0, "lambda_lr must be a non-negative number, got -1"),
+            (|s| s.joint.safe_margin = f64::NAN, "safe_margin must be a non-negative number of metres"),
+        ];
+        for (spoil, message) in cases {
+            let mut s = settings();
+            spoil(&mut s);
+            let Err(TrainError::Setting(e)) = RunSession::create(&dir, s, Existing::Refuse) else {
+                panic!("{message}: accepted")
+            };
+            assert!(e.to_string().starts_with(message), "{e}");
+            assert!(!dir.exists());
+        }
+    }
+}
