@@ -298,6 +298,24 @@ fn first_checkpoint(
     let mut t = JointTrainer::new(task, s.joint.clone(), s.cpg, control)?;
     let kept = pretrain(&mut t, &s.pretrain, &mut |p| watcher.progress(Progress::Pretrain(p)))?;
     if let Some(k) = kept {
+        for (margin, label) in [
+            (true, format!("with {} m more clearance", s.joint.safe_margin)),
+            (false, "with the task's own clearance".to_string()),
+        ] {
+            let tried: Vec<String> = k
+                .candidates
+                .iter()
+                .filter(|c| c.with_safe_margin == margin)
+                .map(|c| format!("{:.2}", c.satisfaction))
+                .collect();
+            if tried.len() > 1 || (!margin && !tried.is_empty()) {
+                watcher.note(&format!(
+                    "planner: {} candidates {label}; their mean paths satisfy from {} of the starts",
+                    tried.len(),
+                    tried.join(" ")
+                ));
+            }
+        }
         if k.retried_without_safe_margin {
             watcher.note(&format!(
                 "planner: no candidate met the spec with {} m more clearance; planning with the task's own",

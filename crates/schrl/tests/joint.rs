@@ -239,3 +239,25 @@ fn runs_per_start_must_divide_the_plan_batch() {
         .to_string();
     assert!(err.contains("runs_per_start") && err.contains("got 3"), "{err}");
 }
+
+/// Point Loop seed 9 once kept a planner at 0.000 after its 9 candidates: while none
+/// has found the task, candidates follow up to ten rounds, then again with the task's
+/// own clearance; each is reported.
+#[test]
+fn pretraining_keeps_trying_while_no_candidate_has_found_the_task() {
+    use schrl::plan::pretrain::{FOUND, PretrainConfig, pretrain};
+    let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
+    let cfg = JointConfig { safe_margin: 0.1, ..JointConfig::default() };
+    let mut t = JointTrainer::new(Task::point(TaskKind::Loop), cfg, CpgConfig::default(), control).unwrap();
+    // Two updates per candidate find nothing.
+    let pre = PretrainConfig { updates: 2, candidates: 1, length_weight: 0.05 };
+    let kept = pretrain(&mut t, &pre, &mut |_| {}).unwrap().unwrap();
+    assert!(kept.satisfaction < FOUND);
+    let with_margin = kept.candidates.iter().filter(|c| c.with_safe_margin).count();
+    assert_eq!(
+        (with_margin, kept.candidates.len()),
+        (10, 20),
+        "ten rounds, then ten more without the margin"
+    );
+    assert!(kept.retried_without_safe_margin);
+}

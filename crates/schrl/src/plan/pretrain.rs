@@ -99,8 +99,20 @@ pub struct PretrainProgress {
     pub satisfaction: f64,
 }
 
-/// What pre-training kept.
+/// One trained candidate, as validated.
 #[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CandidateScore {
+    /// Fraction of validation starts whose mean path satisfies the spec.
+    pub satisfaction: f64,
+    /// Mean length of those paths (metres).
+    pub length: f64,
+    /// Whether it planned with the run's safe margin (else with the task's own
+    /// clearance, the retry).
+    pub with_safe_margin: bool,
+}
+
+/// What pre-training kept.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Pretrained {
     /// Fraction of validation starts whose mean path satisfies the spec.
     pub satisfaction: f64,
@@ -111,6 +123,8 @@ pub struct Pretrained {
     pub retried_without_safe_margin: bool,
     /// Whether the kept planner is one of those (the run's `safe_margin` is then 0).
     pub dropped_safe_margin: bool,
+    /// Every candidate trained, in order (so a user can see how hard the spec was).
+    pub candidates: Vec<CandidateScore>,
 }
 
 /// Pre-trains `t`'s planner (module docs) and installs the kept one. `progress` is
@@ -126,12 +140,15 @@ pub fn pretrain(
     let sat_of = |c: &Option<Candidate>| c.as_ref().map_or(0.0, |c| c.satisfaction);
     let widened = t.plan.task().clone();
     let base = *t.plan.config();
-    let mut best = best_candidate(&base, &widened, cfg, progress)?;
+    let mut scores = vec![];
+    let mut best = best_candidate(&base, &widened, cfg, progress, &mut |c| scores.push(c))?;
     let mut dropped = false;
     let retried = sat_of(&best) < SATISFYING && t.config.safe_margin > 0.0;
     if retried {
         let own = t.task.with_goal_margin(t.config.goal_margin);
-        let fallback = best_candidate(&base, &own, cfg, progress)?;
+        let fallback = best_candidate(&base, &own, cfg, progress, &mut |c| {
+            scores.push(CandidateScore { with_safe_margin: false, ..c })
+        })?;
         if sat_of(&fallback) > sat_of(&best) {
             best = fallback;
             t.config.safe_margin = 0.0;
@@ -147,6 +164,7 @@ pub fn pretrain(
             length: c.length,
             retried_without_safe_margin: retried,
             dropped_safe_margin: dropped,
+            candidates: scores,
         }
     }))
 }
@@ -157,12 +175,14 @@ struct Candidate {
     length: f64,
 }
 
-/// The candidates of [`pretrain`] for `task`, and the one kept.
+/// The candidates of [`pretrain`] for `task`, and the one kept; `scored` hears each
+/// candidate's validation.
 fn best_candidate(
     base: &CpgConfig,
     task: &Task,
     cfg: &PretrainConfig,
     progress: &mut dyn FnMut(PretrainProgress),
+    scored: &mut dyn FnMut(CandidateScore),
 ) -> candle_core::Result<Option<Candidate>> {
     let mut best: Option<Candidate> = None;
     for k in 0..cfg.candidates * FIND_ROUNDS {
@@ -187,6 +207,7 @@ fn best_candidate(
         }
         let (satisfaction, length) =
             (plan.mean_satisfaction(VALIDATION_STARTS)?, plan.mean_path_length(VALIDATION_STARTS)?);
+        scored(CandidateScore { satisfaction, length, with_safe_margin: true });
         let better = match &best {
             None => true,
             Some(b) if satisfaction >= SATISFYING && b.satisfaction >= SATISFYING => length < b.length,
