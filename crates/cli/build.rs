@@ -1,5 +1,7 @@
 //! Records the git commit the binary is built from, for the results it writes
-//! (`schrl experiment` records name it): `SCHRL_GIT_COMMIT`, absent outside a checkout.
+//! (`schrl experiment` records name it): `SCHRL_GIT_COMMIT`, absent outside a checkout,
+//! with `-dirty` appended when tracked files differ from it (the build then holds
+//! code no commit names).
 //! With `--features mujoco` the binary links MuJoCo: the same rpath as the sim crate's
 //! own binaries.
 
@@ -24,7 +26,15 @@ fn main() {
             println!("cargo:rerun-if-changed={path}");
         }
     }
+    // Editing or staging tracked files changes whether the tree is dirty; the
+    // workspace's sources are what a binary is built from.
+    println!("cargo:rerun-if-changed={git_dir}/index");
+    for path in ["../../crates", "../../Cargo.toml", "../../Cargo.lock"] {
+        println!("cargo:rerun-if-changed={path}");
+    }
     if let Some(commit) = git(&["rev-parse", "HEAD"]) {
-        println!("cargo:rustc-env=SCHRL_GIT_COMMIT={commit}");
+        let dirty = git(&["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty());
+        let suffix = if dirty { "-dirty" } else { "" };
+        println!("cargo:rustc-env=SCHRL_GIT_COMMIT={commit}{suffix}");
     }
 }

@@ -140,13 +140,19 @@ fn car_drives_straight_turns_in_place_and_skids() {
     let [fwd, lat] = c.heading.to_body(c.vel);
     assert!(fwd > 0.1 && lat.abs() < 1e-9, "{fwd} {lat}");
     let start = c.pos;
-    for _ in 0..50 {
+    // Spinning after driving straight at speed: the momentum carries it on, skidding,
+    // for the first steps (MuJoCo's car: 0.059 m in 5 steps).
+    for _ in 0..5 {
+        car.step(&[1.0, -1.0]).unwrap();
+    }
+    let c = car.dynamics();
+    let moved = (c.pos[0] - start[0]).hypot(c.pos[1] - start[1]);
+    assert!(moved > 0.04, "{moved}");
+    for _ in 0..45 {
         car.step(&[1.0, -1.0]).unwrap();
     }
     let c = car.dynamics();
     assert!(c.yaw_rate < -1.0, "left forward, right back: turns clockwise: {}", c.yaw_rate);
-    // Spinning after driving straight at speed: the momentum makes it skid sideways.
-    assert!((c.pos[0] - start[0]).hypot(c.pos[1] - start[1]) > 0.05);
 }
 
 #[test]

@@ -93,7 +93,7 @@ pub fn shell_words(program: &str, args: &[String]) -> String {
 }
 
 /// The commit HEAD named when this binary was built (`unknown` outside a git
-/// checkout); changes not yet committed then are not marked.
+/// checkout), ending in `-dirty` when tracked files had uncommitted changes.
 pub const COMMIT: &str = match option_env!("SCHRL_GIT_COMMIT") {
     Some(c) => c,
     None => "unknown",

@@ -191,8 +191,17 @@ pub fn provenance(s: &Section) -> String {
             "full budgets"
         },
         if t.commits.len() == 1 { "" } else { "s" },
-        t.commits.iter().map(|c| &c[..c.len().min(12)]).collect::<Vec<_>>().join(", ")
+        t.commits.iter().map(|c| short_commit(c)).collect::<Vec<_>>().join(", ")
     )
+}
+
+/// A commit as a report names it: the hash's first 12 digits, keeping `-dirty`.
+fn short_commit(commit: &str) -> String {
+    let (hash, dirty) = match commit.strip_suffix("-dirty") {
+        Some(hash) => (hash, "-dirty"),
+        None => (commit, ""),
+    };
+    format!("{}{dirty}", &hash[..hash.len().min(12)])
 }
 
 #[cfg(test)]
@@ -235,5 +244,12 @@ pub(crate) mod tests {
         assert_eq!(t.rows[0], ["point", "seq", "schrl", "2", "0.500 ± 0.707", "500.0 (1 of 2 seeds)"]);
         assert_eq!(t.rows[1], ["point", "loop", "schrl", "1", "0.500", "900.0"]);
         assert_eq!(t.seeds, [0, 1]);
+    }
+
+    #[test]
+    fn a_dirty_build_stays_marked_dirty_in_the_report() {
+        assert_eq!(short_commit("0123456789abcdef0123-dirty"), "0123456789ab-dirty");
+        assert_eq!(short_commit("0123456789abcdef0123"), "0123456789ab");
+        assert_eq!(short_commit("unknown"), "unknown");
     }
 }

@@ -78,7 +78,7 @@ pub fn open_map(robot: Robot) -> Map {
 pub fn default_steps(robot: Robot) -> usize {
     match robot {
         Robot::Point => 1_000_000,
-        Robot::Car => 2_000_000,
+        Robot::Car => 1_000_000,
         Robot::Drone => 400_000,
         // Not tuned here: the paper's Doggo runs use 1e8 steps in all (Fig. 3).
         Robot::Doggo => 10_000_000,

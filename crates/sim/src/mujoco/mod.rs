@@ -11,10 +11,13 @@
 //!   reward and episode bookkeeping as for every robot).
 //! * [`PointTwin`] — the native [`crate::Point`] rebuilt in MuJoCo, for checking the
 //!   native integrator against MuJoCo's.
+//! * [`CarTwin`] — Safety Gym's Car in MuJoCo, for checking the native [`crate::Car`].
 
+mod car_twin;
 mod doggo;
 mod point_twin;
 
+pub use car_twin::{CAR_TWIN_XML, CarTwin};
 pub use doggo::{DOGGO_XML, Doggo, FALL_HEIGHT, FALL_TILT_COS};
 pub use point_twin::{POINT_TWIN_XML, PointTwin};
 

@@ -5,14 +5,19 @@
 //! side, 0.1 m behind the centre) and a passive ball caster 0.1 m ahead. In this
 //! model's frame x points forward (the XML's −y, where the front bumper is).
 //!
-//! * Each wheel is driven by a motor, torque `clamp(a_i, ±0.02)` N·m (gear 1,
-//!   `forcerange` ±0.02); `action = [left, right]` in [−1, 1].
+//! * Each wheel is driven by a motor, torque `0.02 a_i` N·m for `action = [left,
+//!   right]` in [−1, 1]: the action spans the motor's whole torque range. (Safety
+//!   Gym's motor, gear 1 with `forcerange` ±0.02, saturates at 2 % of its ±1 control
+//!   range, so a policy's action there acts by its sign alone; the deployed
+//!   controller's mean action then dithered forward and back in place: 13 of 200
+//!   goals within 2 m never reached.)
 //! * Wheels are massless in the plane of motion (their inertia, 2.5e-6 kg·m², is
 //!   four orders below the car's): a rolling wheel passes `(τ − c_w Ω)/r` to the
-//!   ground; when that exceeds Coulomb friction `μ N` the wheel spins and slips and
-//!   the ground force is `μ N`. Sideways, the wheels resist slip with friction
-//!   impulses bounded by the friction left over (a velocity-level contact solve), so
-//!   the car skids when turned hard.
+//!   ground while rolling. Sideways, the wheels hold against slip with the force that
+//!   stops it within a physics step. When that pair (along, across) exceeds the
+//!   wheel's Coulomb friction disc `μ N`, the wheel slips and the ground force is the
+//!   same pair scaled onto the disc (a velocity-level contact solve), so the car skids
+//!   when turned hard and still grips sideways when its wheels spin.
 //! * The caster rolls freely; its ball-joint damping makes a rolling drag
 //!   `c_c v / r²`.
 //!
@@ -23,7 +28,7 @@
 //! | yaw inertia | 3.44e-4 kg·m² | car.xml geometry |
 //! | wheel / caster joint damping | 0.001 | car.xml default |
 //! | friction μ | 1 | MuJoCo default |
-//! | loads | m g / 4 per wheel, m g / 2 caster | static balance of the layout |
+//! | loads | 0.268 m g per wheel, 0.463 m g caster | static balance about the centre of mass, 7.4 mm behind the centre (car.xml geometry) |
 //! | collision shape | disc of radius 0.2 m (chassis with bumpers) | car.xml geometry |
 //! | reach radius | 0.3 m | reference setup |
 //!
@@ -53,8 +58,34 @@ const MOTOR_LIMIT: f64 = 0.02;
 const WHEEL_DAMPING: f64 = 0.001;
 const CASTER_DAMPING: f64 = 0.001;
 const MU: f64 = 1.0;
-const WHEEL_LOAD: f64 = MASS * GRAVITY / 4.0;
-const CASTER_LOAD: f64 = MASS * GRAVITY / 2.0;
+/// Centre of mass ahead of the chassis centre (m): the bumpers, wheels and caster of
+/// `car.xml` (density 5) put it 7.4 mm behind, towards the wheels.
+const COM_X: f64 = {
+    const D: f64 = 5.0;
+    const PI: f64 = std::f64::consts::PI;
+    // (mass, x) of each geom, x forward (the XML's −y).
+    let parts = [
+        (D * 0.2 * 0.2 * 0.1, 0.0),                          // chassis
+        (D * 0.2 * 0.02 * 0.1, -0.15),                       // back bumper
+        (D * 0.02 * 0.05 * 0.06, -0.125),                    // back connector
+        (D * 0.1 * 0.02 * 0.1, 0.165),                       // front bumper
+        (D * 0.1 * 0.06 * 0.02, 0.13),                       // front connector
+        (2.0 * D * PI * 0.05 * 0.05 * 0.05, WHEEL_X),        // two wheels
+        (D * 4.0 / 3.0 * PI * 0.05 * 0.05 * 0.05, CASTER_X), // caster
+    ];
+    let (mut m, mut mx, mut i) = (0.0, 0.0, 0);
+    while i < parts.len() {
+        m += parts[i].0;
+        mx += parts[i].0 * parts[i].1;
+        i += 1;
+    }
+    mx / m
+};
+/// Static balance about the centre of mass: the wheels (at `WHEEL_X`) and the caster
+/// (at `CASTER_X`) share the weight in inverse proportion to their distances from it.
+/// MuJoCo's contact forces at rest agree to 4 digits (0.537 on the wheels).
+const WHEEL_LOAD: f64 = MASS * GRAVITY * (CASTER_X - COM_X) / (CASTER_X - WHEEL_X) / 2.0;
+const CASTER_LOAD: f64 = MASS * GRAVITY * (COM_X - WHEEL_X) / (CASTER_X - WHEEL_X);
 const RADIUS: f64 = 0.2;
 const INV_MASS: f64 = 1.0 / MASS;
 const INV_WHEEL_RADIUS: f64 = 1.0 / WHEEL_RADIUS;
@@ -127,15 +158,28 @@ impl Planar {
     }
 }
 
-/// The wheels' ground forces (left, right) for motor `drive` (torque / r) at body
-/// velocity (`u`, yaw rate `w`): traction `drive − c_w v / r²` of a massless wheel
-/// rolling at `v = u ∓ w y`, or `±μ N` when it slips.
+/// The traction (left, right) each wheel would pass to the ground while rolling:
+/// `drive − c_w v / r²` of a massless wheel at ground speed `v = u ∓ w y`, for motor
+/// `drive` (torque / r) at body velocity (`u`, yaw rate `w`).
 #[inline]
-fn traction(drive: [f64; 2], u: f64, w: f64) -> [f64; 2] {
+fn rolling_traction(drive: [f64; 2], u: f64, w: f64) -> [f64; 2] {
     // Summed so that the term waiting on `u` comes last.
     let turn = ROLL_DAMPING * WHEEL_Y * w;
     let roll = ROLL_DAMPING * u;
-    [(drive[0] + turn) - roll, (drive[1] - turn) - roll].map(|f| f.clamp(-WHEEL_GRIP, WHEEL_GRIP))
+    [(drive[0] + turn) - roll, (drive[1] - turn) - roll]
+}
+
+/// A wheel's ground force (along, across) and whether it slips: the force that keeps
+/// it rolling without sliding (`along`, `across`), or, when that exceeds the friction
+/// disc `μ N`, the same force scaled onto the disc (friction against the slip the
+/// contact would otherwise have, as a velocity-level contact solver finds it).
+#[inline]
+fn wheel_force(along: f64, across: f64) -> (f64, f64, bool) {
+    let n2 = along * along + across * across;
+    // Branch-free: while driving at random, rolling and slipping alternate too often
+    // for a branch to be predicted.
+    let k = (WHEEL_GRIP / n2.sqrt()).min(1.0);
+    (k * along, k * across, k < 1.0)
 }
 
 /// One physics step of 0.004 s (semi-implicit Euler).
@@ -148,42 +192,32 @@ fn traction(drive: [f64; 2], u: f64, w: f64) -> [f64; 2] {
 #[inline]
 fn substep(st: Planar, drive: [f64; 2]) -> Planar {
     let Planar { mut pos, u, l, w, mut heading } = st;
-    let long = traction(drive, u, w);
+    let roll = rolling_traction(drive, u, w);
     // Caster rolling drag `c_c v / r²`, bounded by its friction.
     let cl = l + CASTER_X * w;
-    let speed2 = u * u + cl * cl;
-    let (fcu, fcl) = if speed2 * (CASTER_DRAG * CASTER_DRAG) > CASTER_GRIP * CASTER_GRIP {
-        let k = CASTER_GRIP / speed2.sqrt();
-        (-k * u, -k * cl)
-    } else {
-        (-CASTER_DRAG * u, -CASTER_DRAG * cl)
-    };
-    // Explicit update with the traction and drag forces; the wheels' torque about the
-    // centre is `y (f_right − f_left)`.
-    let u_new = (u + DT_M * fcu) + DT_M * (long[0] + long[1]);
+    let k = CASTER_DRAG.min(CASTER_GRIP / (u * u + cl * cl).sqrt());
+    let (fcu, fcl) = (-k * u, -k * cl);
+    // Sideways, both wheels sit at the same x, so their contact points slide at one
+    // speed, `l + x w`; the force that stops that slide within the step (after the
+    // wheels' traction, bounded by its grip) is shared by the two wheels. The caster's
+    // drag is left out of it (a Jacobi step rather than Gauss–Seidel, corrected on the
+    // next step): it keeps the caster's and the wheels' square roots off one
+    // dependency chain (BENCHMARKS.md).
+    let est = roll.map(|f| f.clamp(-WHEEL_GRIP, WHEEL_GRIP));
+    let stop = -(LATERAL_MASS / DT) * (l + WHEEL_X * w)
+        - (LATERAL_MASS * WHEEL_X * DT_I * WHEEL_Y / DT) * (est[1] - est[0]);
+    // Each wheel's friction disc bounds both together: a wheel spinning under full
+    // torque still holds sideways (MuJoCo's car turns on the spot at 1.3 rad/s;
+    // giving traction priority, as this model once did, left nothing sideways and
+    // it spun at 6.17).
+    let (left, left_across, _) = wheel_force(roll[0], 0.5 * stop);
+    let (right, right_across, _) = wheel_force(roll[1], 0.5 * stop);
     let l_mid = l + DT_M * fcl;
     let w_spin = w + DT_I * CASTER_X * fcl;
-    let w_mid = w_spin + DT_I * WHEEL_Y * (long[1] - long[0]);
-    // Sideways friction: both wheels sit at the same x, so their contact points
-    // slide sideways at one speed, `l + x w`; the impulse that stops it is bounded by
-    // the friction both wheels have left after traction (the fixed point of a
-    // Gauss–Seidel contact solve, in closed form).
-    let want = -LATERAL_MASS * (l_mid + WHEEL_X * w_spin)
-        - (LATERAL_MASS * WHEEL_X * DT_I * WHEEL_Y) * (long[1] - long[0]);
-    // √(a² − f²) ≥ a − |f|: when the impulse is within that bound, no root is needed.
-    let a = WHEEL_GRIP;
-    let j = if want.abs() <= (2.0 * a - long[0].abs() - long[1].abs()) * DT {
-        want
-    } else if long[0].abs() >= a && long[1].abs() >= a {
-        // Both wheels slip (the common case at full torque): no friction is left.
-        0.0
-    } else {
-        let room = |f: f64| (a * a - f * f).max(0.0).sqrt();
-        let limit = (room(long[0]) + room(long[1])) * DT;
-        want.clamp(-limit, limit)
-    };
-    let l_new = l_mid + INV_MASS * j;
-    let w_new = w_mid + WHEEL_X * INV_INERTIA * j;
+    let across = left_across + right_across;
+    let u_new = (u + DT_M * fcu) + DT_M * (left + right);
+    let l_new = l_mid + DT_M * across;
+    let w_new = (w_spin + DT_I * WHEEL_Y * (right - left)) + DT_I * WHEEL_X * across;
     let [vx, vy] = heading.to_world([u_new, l_new]);
     pos[0] += DT * vx;
     pos[1] += DT * vy;
@@ -212,7 +246,7 @@ impl Dynamics for Car {
     }
 
     fn advance(&mut self, action: &[f64], map: &Map, _goal: &[f64]) -> bool {
-        let torque = [action[0].clamp(-MOTOR_LIMIT, MOTOR_LIMIT), action[1].clamp(-MOTOR_LIMIT, MOTOR_LIMIT)];
+        let torque = [action[0] * MOTOR_LIMIT, action[1] * MOTOR_LIMIT];
         let drive = torque.map(|t| t * INV_WHEEL_RADIUS);
         let t = DT * SUBSTEPS as f64;
         let mut guard = ContactGuard::new(map, &self.pos, RADIUS);
@@ -234,13 +268,17 @@ impl Dynamics for Car {
         self.vel = st.world_vel();
         self.yaw_rate = st.w;
         self.heading = st.heading;
-        let long = traction(drive, st.u, st.w);
+        // Wheel spin: rolling with the ground, or, slipping, where the motor's torque
+        // balances the damping and the ground's force (the sideways share estimated
+        // as zero: a state read-out, not fed back).
+        let roll = rolling_traction(drive, st.u, st.w);
         for i in 0..2 {
             let v_long = st.u - st.w * [WHEEL_Y, -WHEEL_Y][i];
-            self.wheel_speed[i] = if long[i].abs() < WHEEL_GRIP {
-                v_long * INV_WHEEL_RADIUS
+            let (along, _, slips) = wheel_force(roll[i], 0.0);
+            self.wheel_speed[i] = if slips {
+                (torque[i] - WHEEL_RADIUS * along) * INV_WHEEL_DAMPING
             } else {
-                (torque[i] - WHEEL_RADIUS * long[i]) * INV_WHEEL_DAMPING
+                v_long * INV_WHEEL_RADIUS
             };
         }
         self.accel = [(self.vel[0] - before[0]) * (1.0 / DT), (self.vel[1] - before[1]) * (1.0 / DT)];
