@@ -251,11 +251,11 @@ fn train<'py>(
         if seed.is_some_and(|s| s != saved.seed) {
             changed.push("seed".into());
         }
-        if let Some(t) = task {
-            let t = resolve(robot.or((!t.ends_with(".toml")).then_some(saved.robot)), t)?;
-            if t.toml != saved.task_toml || t.spec != saved.task_spec {
-                changed.push("task".into());
-            }
+        if let Some(t) = task
+            && Task::differs_from_saved(robot, t, saved.robot, (&saved.task_toml, &saved.task_spec))
+                .map_err(|e| PyValueError::new_err(format!("task: {e}")))?
+        {
+            changed.push("task".into());
         }
         if robot.is_some_and(|r| r != saved.robot) {
             changed.push("robot".into());

@@ -14,18 +14,15 @@ pub fn resolve(robot: Option<Robot>, task: &str) -> Result<Task> {
 }
 
 /// Whether `--task` (with `--robot`) on a resumed run names a task other than the
-/// saved one (`saved_robot`, its TOML and spec texts); `None`: not given. A built-in
-/// name means the saved robot's task; a file names its own.
+/// saved one ([`Task::differs_from_saved`]); `None`: not given.
 pub fn differs_from_saved(
     robot: Option<Robot>,
     task: Option<&str>,
     saved_robot: Robot,
-    (toml, spec): (&str, &str),
+    saved: (&str, &str),
 ) -> Result<bool> {
     let Some(t) = task else { return Ok(false) };
-    let robot = robot.or((!t.ends_with(".toml")).then_some(saved_robot));
-    let task = resolve(robot, t)?;
-    Ok(task.toml != toml || task.spec != spec)
+    Task::differs_from_saved(robot, t, saved_robot, saved).map_err(|e| anyhow::anyhow!("--task {e}"))
 }
 
 /// Subcommands of `schrl task`.

@@ -74,7 +74,8 @@ pub fn open_map(robot: Robot) -> Map {
     }
 }
 
-/// The default training budget for `robot` (environment steps).
+/// The default training budget for `robot` (environment steps; README, *Controller
+/// results*).
 pub fn default_steps(robot: Robot) -> usize {
     match robot {
         Robot::Point => 1_000_000,

@@ -265,6 +265,21 @@ impl Task {
         }
     }
 
+    /// Whether `task` (as [`Task::resolve`] takes it, with `robot` if given) names a
+    /// task other than a saved one: `saved_robot` and its TOML and spec texts. A
+    /// built-in name means the saved robot's task unless `robot` says otherwise; a
+    /// file names its own. What a resumed run checks its `task` argument with.
+    pub fn differs_from_saved(
+        robot: Option<Robot>,
+        task: &str,
+        saved_robot: Robot,
+        (toml, spec): (&str, &str),
+    ) -> Result<bool, TaskError> {
+        let robot = robot.or((!task.ends_with(".toml")).then_some(saved_robot));
+        let t = Task::resolve(robot, task)?;
+        Ok(t.toml != toml || t.spec != spec)
+    }
+
     /// The Point version of `kind` (the shipped files; they are tested to load).
     pub fn point(kind: TaskKind) -> Task {
         Task::builtin("point", kind).expect("shipped Point tasks are valid (tested)")
