@@ -10,8 +10,8 @@
 //! * [`contact`] — keeping robots out of obstacles.
 //! * [`vec_env`] — N environments stepped together, deterministic under a seed.
 //! * [`render`] — pictures of maps, robots, goals, waypoints and trajectories.
-//! * `mujoco` (cargo feature `mujoco`) — the Doggo quadruped on MuJoCo 3.17.0, and a
-//!   MuJoCo twin of the Point for checking the native dynamics. Without the feature,
+//! * `mujoco` (cargo feature `mujoco`) — the Doggo quadruped on MuJoCo 3.17.0, and
+//!   MuJoCo twins of the Point and the Car for checking the native dynamics. Without the feature,
 //!   [`make_env`] answers [`Robot::Doggo`] with [`EnvError::MujocoDisabled`], which
 //!   says how to enable it.
 //!

@@ -1,4 +1,4 @@
-//! The Doggo on MuJoCo, and the MuJoCo twin of the native Point (feature `mujoco`).
+//! The Doggo on MuJoCo, and the MuJoCo twins of the native Point and Car (feature `mujoco`).
 #![cfg(feature = "mujoco")]
 
 use rand::{Rng, SeedableRng};
