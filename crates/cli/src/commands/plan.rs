@@ -77,6 +77,38 @@ impl MipFlags {
     }
 }
 
+/// Flags of the gradient planner (`plan time`, `plan compare`, `eval --planner gradient`).
+/// Leung et al.'s plain ascent: `--gradient-repair-every 0 --gradient-outside-region
+/// --gradient-iterations 200 --gradient-restarts 50`.
+#[derive(clap::Args, Debug)]
+pub struct GradientFlags {
+    /// Adam steps per attempt of the gradient planner.
+    #[arg(long, default_value_t = GradientPlannerConfig::default().iterations, value_parser = super::count::<1, 10_000_000>)]
+    gradient_iterations: usize,
+    /// Attempts (random initialisations) of the gradient planner.
+    #[arg(long, default_value_t = GradientPlannerConfig::default().restarts, value_parser = super::count::<1, 100_000>)]
+    gradient_restarts: usize,
+    /// Steps between redraws of a waypoint the robustness binds on (0: no repair).
+    #[arg(long, default_value_t = GradientPlannerConfig::default().repair_every)]
+    gradient_repair_every: usize,
+    /// Let the gradient planner's waypoints leave the map's region.
+    #[arg(long)]
+    gradient_outside_region: bool,
+}
+
+impl GradientFlags {
+    /// The gradient planner's settings.
+    pub fn config(&self) -> GradientPlannerConfig {
+        GradientPlannerConfig {
+            iterations: self.gradient_iterations,
+            restarts: self.gradient_restarts,
+            repair_every: self.gradient_repair_every,
+            in_region: !self.gradient_outside_region,
+            ..GradientPlannerConfig::default()
+        }
+    }
+}
+
 /// A [`MipConfig::validate`] message with its key as the flag (`mip.max_step` → `--max-step`).
 fn mip_flag(message: &str) -> String {
     match message.strip_prefix("mip.").and_then(|m| m.split_once(' ')) {
@@ -150,6 +182,8 @@ pub struct CompareArgs {
     /// Replace the picture.
     #[arg(long)]
     force: bool,
+    #[command(flatten)]
+    gradient: GradientFlags,
 }
 
 /// A trained planner and the starts to plan from: shared by `plan sample` and `plan time`.
@@ -176,6 +210,8 @@ pub struct TimeArgs {
     planners: Vec<TimedPlanner>,
     #[command(flatten)]
     mip: MipFlags,
+    #[command(flatten)]
+    gradient: GradientFlags,
 }
 
 /// A planner `schrl plan time` can time.
@@ -502,7 +538,7 @@ fn time(args: TimeArgs) -> Result<()> {
     }
     if args.planners.contains(&TimedPlanner::Gradient) {
         let bar = timing_bar(n, "gradient planner");
-        let cfg = GradientPlannerConfig::default();
+        let cfg = args.gradient.config();
         let (mut secs, mut ok) = (Vec::with_capacity(n), 0);
         for s in &starts {
             let t0 = std::time::Instant::now();
@@ -590,9 +626,10 @@ fn compare(args: CompareArgs) -> Result<()> {
     let dim = task.map.dim();
     let length = |p: &[Vec<f64>]| p.windows(2).map(|w| dist(&w[0], &w[1])).sum::<f64>();
     let hard = Semantics::hard();
+    let gradient = args.gradient.config();
     for (i, (s, net)) in starts.iter().zip(&network).enumerate() {
         let net: Vec<Vec<f64>> = net.iter().map(|w| w.iter().map(|&x| x as f64).collect()).collect();
-        let grad = gradient_planner::plan(task, &spec, s, &GradientPlannerConfig::default(), &mut rng)?;
+        let grad = gradient_planner::plan(task, &spec, s, &gradient, &mut rng)?;
         let grad: Vec<Vec<f64>> = grad.path.chunks(dim).map(|c| c.to_vec()).collect();
         let rho = |p: &[Vec<f64>]| spec.robustness(&p.concat(), &hard);
         println!(

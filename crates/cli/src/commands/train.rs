@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use schrl::plan::cpg::Method;
-use schrl::plan::gradient_planner::GradientPlannerConfig;
 use schrl::plan::planner::PlannerKind;
 use schrl::run::RunError;
 use schrl::run::evaluate::{
@@ -254,6 +253,9 @@ pub struct EvalArgs {
     /// The MIP planner's settings (with `--planner mip`).
     #[command(flatten)]
     mip: super::plan::MipFlags,
+    /// The gradient planner's settings (with `--planner gradient`).
+    #[command(flatten)]
+    gradient: super::plan::GradientFlags,
     /// Drive with this `schrl control train` run's controller instead of the run's
     /// (e.g. DIR/general: the general controller before joint training).
     #[arg(long)]
@@ -426,7 +428,7 @@ pub fn eval(args: EvalArgs) -> Result<()> {
     }
     let plans = match (args.planner, args.sampled_plans) {
         (PlannerChoice::Gradient, _) => {
-            Plans::Gradient { task: t.plan.task(), config: GradientPlannerConfig::default() }
+            Plans::Gradient { task: t.plan.task(), config: args.gradient.config() }
         }
         (PlannerChoice::Mip, _) => Plans::Mip { task: t.plan.task(), config: args.mip.config()? },
         (PlannerChoice::Network, true) => Plans::Sampled(t.plan.planner()),
