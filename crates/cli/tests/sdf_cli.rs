@@ -31,3 +31,33 @@ fn fits_draws_checks_and_refuses_to_clobber() {
     let empty = schrl(&["sdf", "fit", "--map", "empty", "--out", dir.join("e.json").to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&empty.stderr).contains("no obstacle"));
 }
+
+/// `schrl train --obstacle-sdf` refuses a network of another map and a contradicting
+/// `--obstacle exact`, before any training, naming what is wrong.
+#[test]
+fn train_refuses_a_neural_obstacle_that_does_not_fit_the_task() {
+    let dir = std::env::temp_dir().join(format!("schrl-sdf-train-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let net = dir.join("walls.json");
+    let net_s = net.to_str().unwrap();
+    let o = schrl(&["sdf", "fit", "--map", "walls", "--steps", "10", "--out", net_s]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = dir.join("run");
+    let run_s = run.to_str().unwrap();
+    let drone =
+        schrl(&["train", "--robot", "drone", "--task", "seq", "--obstacle-sdf", net_s, "--out", run_s]);
+    let err = String::from_utf8_lossy(&drone.stderr);
+    assert!(
+        !drone.status.success()
+            && err.contains("--obstacle-sdf")
+            && err.contains("walls")
+            && err.contains("duck"),
+        "{err}"
+    );
+    let both =
+        schrl(&["train", "--task", "seq", "--obstacle", "exact", "--obstacle-sdf", net_s, "--out", run_s]);
+    let err = String::from_utf8_lossy(&both.stderr);
+    assert!(!both.status.success() && err.contains("--obstacle exact"), "{err}");
+    assert!(!run.join("manifest.json").exists(), "nothing was started");
+}

@@ -166,6 +166,37 @@ fn negative_or_infinite_planning_margins_are_refused_by_name() {
     );
 }
 
+/// `neural_obstacle` reaches the planner's task only (runs are judged on the exact
+/// map), trains like the exact one for a few iterations, and a network of another
+/// map is refused by its key.
+#[test]
+fn a_neural_obstacle_goes_to_the_planner_only() {
+    use schrl::task::ObstacleModel;
+    use schrl::task::neural_sdf::{NeuralSdf, SdfFitConfig};
+    let fit = |map: &str| {
+        NeuralSdf::fit(&sim::Map::by_name(map).unwrap(), &SdfFitConfig { steps: 300, ..Default::default() })
+            .unwrap()
+            .0
+    };
+    let mut cc = ControlConfig::for_robot(Robot::Point);
+    cc.ppo = PpoConfig { rollout: 400, minibatch: 100, epochs: 1, ..PpoConfig::reference() };
+    let cfg = JointConfig { neural_obstacle: Some(fit("walls")), ..JointConfig::default() };
+    let control = ControlTrainer::new(cc.clone()).unwrap();
+    let mut t = JointTrainer::new(Task::point(TaskKind::Branch), cfg, CpgConfig::default(), control).unwrap();
+    assert!(matches!(t.plan.task().obstacle, ObstacleModel::Neural(_)));
+    assert_eq!(t.task.obstacle, ObstacleModel::Exact);
+    for _ in 0..3 {
+        assert!(t.iterate().unwrap().plan_rho.is_finite());
+    }
+    let cfg = JointConfig { neural_obstacle: Some(fit("duck")), ..JointConfig::default() };
+    let control = ControlTrainer::new(cc).unwrap();
+    let err = JointTrainer::new(Task::point(TaskKind::Branch), cfg, CpgConfig::default(), control)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("neural_obstacle") && err.contains("duck") && err.contains("walls"), "{err}");
+}
+
 #[test]
 fn reached_positions_that_cut_a_wall_corner_do_not_fail_a_collision_free_run() {
     // Regression (Point Branch seed 2): the straight segment between two

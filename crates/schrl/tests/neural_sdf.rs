@@ -38,7 +38,7 @@ fn maps_without_obstacles_have_nothing_to_learn() {
 #[test]
 fn input_gradient_matches_finite_differences_and_flows_through_robustness() {
     let (net, _) = fitted();
-    let pred = net.clone().clearance(0.1);
+    let pred = std::sync::Arc::new(net.clone()).clearance(0.1);
     for p in [[1.3, 0.7], [-2.0, 0.4], [0.1, -2.6]] {
         let mut g = [0.0; 2];
         let v = pred.value_and_grad(0, &p, 1.0, &mut g);
@@ -87,4 +87,89 @@ fn saves_loads_and_refuses_bad_files() {
     assert!(store::sdf::load(&dir.join("missing.json")).unwrap_err().to_string().contains("missing.json"));
     // The duck is 3-D and is checked against its own map only.
     assert!(net.evaluate(&Map::by_name("walls").unwrap(), 1, 10).is_err());
+}
+
+fn duck_net() -> std::sync::Arc<NeuralSdf> {
+    let (net, _) =
+        NeuralSdf::fit(&Map::by_name("duck").unwrap(), &SdfFitConfig { steps: 2000, ..Default::default() })
+            .unwrap();
+    std::sync::Arc::new(net)
+}
+
+/// Along a segment the network's clearance is its smallest sampled distance: through
+/// the duck negative, past it positive and near the exact segment distance; its
+/// gradient moves both ends (finite differences), and the forward-only distance
+/// equals the one computed with the gradient.
+#[test]
+fn neural_clearance_along_segments_follows_the_exact_segment_distance() {
+    use schrl::task::SafeAlong;
+    let net = duck_net();
+    let map = Map::by_name("duck").unwrap();
+    let pred = net.clearance(0.0).along(SafeAlong::Segments);
+    let through = [-1.5, 0.0, 0.5, 1.5, 0.0, 0.5];
+    assert!(pred.value_on_path(&through, 3, 1) < -0.2, "{}", pred.value_on_path(&through, 3, 1));
+    // At the waypoint alone (the path's ends are outside the duck) it is positive.
+    assert!(net.clearance(0.0).value_on_path(&through, 3, 1) > 0.0);
+    let past = [-2.0, 1.5, 1.0, 1.93, 1.45, 1.1];
+    let (v, exact) = (pred.value_on_path(&past, 3, 1), map.segment_sdf(&past[..3], &past[3..]));
+    assert!(v > 0.0 && (v - exact).abs() < 0.15, "{v} vs exact {exact}");
+    let mut g = [0.0; 6];
+    let value = pred.value_and_grad_on_path(&past, 3, 1, 1.0, &mut g);
+    assert!((value - v).abs() < 1e-12);
+    for k in 0..6 {
+        let (mut a, mut b) = (past, past);
+        a[k] += 1e-6;
+        b[k] -= 1e-6;
+        let fd = (pred.value_on_path(&a, 3, 1) - pred.value_on_path(&b, 3, 1)) / 2e-6;
+        assert!((fd - g[k]).abs() < 1e-4, "∂/∂x{k}: {} vs {fd}", g[k]);
+    }
+    for p in [[0.3, -1.2, 0.8], [2.0, 2.0, 2.0], [0.0, 0.0, 0.5]] {
+        let mut g = [0.0; 3];
+        assert!((net.distance(&p) - net.distance_and_grad(&p, &mut g)).abs() < 1e-12);
+    }
+}
+
+/// A task planned with a neural obstacle binds `safe` to the network, while the
+/// spec runs are judged by keeps the exact geometry; a network of another map is
+/// refused, naming both maps.
+#[test]
+fn a_neural_obstacle_is_what_the_planner_sees_not_what_runs_are_judged_by() {
+    use schrl::task::{ObstacleModel, Task, TaskKind};
+    let net = duck_net();
+    let task = Task::builtin("drone", TaskKind::Seq).unwrap();
+    let planned = task.with_obstacle(ObstacleModel::Neural(net.clone())).unwrap();
+    let safe = stl::parse("G[1,1] safe").unwrap();
+    // A path whose one segment grazes the duck: the two distances differ there.
+    let path = [-1.8, 0.2, 0.6, 1.8, 0.9, 1.2];
+    let hard = Semantics::hard();
+    let exact = task.spec_of(safe.clone()).robustness(&path, &hard).unwrap();
+    let neural = planned.spec_of(safe).robustness(&path, &hard).unwrap();
+    let sampled = net.clearance(task.safe_radius).along(task.safe_along).value_on_path(&path, 3, 1);
+    assert!((neural - sampled).abs() < 1e-12 && (neural - exact).abs() > 1e-6, "{neural} {exact}");
+    // Judging: a task whose spec is `safe` alone, run near the duck, is judged on
+    // the exact distance at the reached positions whichever obstacle the planner saw.
+    let only_safe = Task::from_texts(
+        std::path::Path::new("safe.toml"),
+        &task.toml,
+        std::path::Path::new("safe.stl"),
+        "G[1,8] safe",
+    )
+    .unwrap();
+    let positions: Vec<Vec<f64>> =
+        (0..=8).map(|i| vec![0.25 * i as f64 - 1.0, 0.75 + 0.02 * i as f64, 0.6]).collect();
+    let reached: Vec<usize> = (1..=8).collect();
+    let judged = |t: &Task| t.execution_spec().judge(&positions, &positions, &reached).robustness;
+    let map = Map::by_name("duck").unwrap();
+    let truth = positions[1..].iter().map(|p| map.sdf(p) - task.safe_radius).fold(f64::INFINITY, f64::min);
+    let seen =
+        positions[1..].iter().map(|p| net.distance(p) - task.safe_radius).fold(f64::INFINITY, f64::min);
+    assert!((seen - truth).abs() > 1e-6, "the network should differ from the exact distance here");
+    let with_net = only_safe.with_obstacle(ObstacleModel::Neural(net.clone())).unwrap();
+    assert!((judged(&only_safe) - truth).abs() < 1e-9, "{} vs {truth}", judged(&only_safe));
+    assert_eq!(judged(&with_net), judged(&only_safe));
+    let (walls, _) =
+        NeuralSdf::fit(&Map::by_name("walls").unwrap(), &SdfFitConfig { steps: 1, ..Default::default() })
+            .unwrap();
+    let err = task.with_obstacle(ObstacleModel::Neural(std::sync::Arc::new(walls))).unwrap_err();
+    assert!(err.contains("walls") && err.contains("duck"), "{err}");
 }

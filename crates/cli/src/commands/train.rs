@@ -13,6 +13,7 @@ use schrl::run::evaluate::{
 };
 use schrl::run::joint::{JointRunSettings, SettingError};
 use schrl::store::{self, JsonLines, RunKind};
+use schrl::task::neural_sdf::{NeuralSdf, SdfFitConfig};
 use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watcher};
 use sim::Robot;
 use stl::Semantics;
@@ -103,6 +104,16 @@ pub struct TrainArgs {
     /// `safe_radius`) and from regions to avoid [default: 0.1].
     #[arg(long)]
     safe_margin: Option<f64>,
+    /// What the planner's `safe` measures obstacles with: exact (the map's distance)
+    /// or neural (a network fitted to it, as the paper's Drone planner saw the duck;
+    /// fitted with `schrl sdf fit`'s defaults and the run's seed unless
+    /// --obstacle-sdf names one). Runs are judged on the exact geometry [default: exact].
+    #[arg(long, value_enum)]
+    obstacle: Option<ObstacleChoice>,
+    /// The neural SDF the planner sees (a `schrl sdf fit --out` file); implies
+    /// `--obstacle neural`.
+    #[arg(long, value_name = "FILE.json")]
+    obstacle_sdf: Option<PathBuf>,
     #[command(flatten)]
     run: super::RunDirArgs,
     /// Evaluation groups of 100 runs after training; 0: none [default: 5].
@@ -153,6 +164,7 @@ impl TrainArgs {
         set(&mut j.length_weight, self.length_weight);
         j.freeze_planner = self.freeze_planner;
         j.freeze_controller = self.freeze_controller;
+        j.neural_obstacle = self.neural_obstacle(&task, s.seed)?;
         let c = &mut s.cpg;
         set(&mut c.semantics, self.semantics);
         set(&mut c.method, self.method);
@@ -167,6 +179,41 @@ impl TrainArgs {
         set(&mut s.save_every, self.save_every);
         s.validate().map_err(flag_error)?;
         Ok(s)
+    }
+
+    /// The network `--obstacle neural` / `--obstacle-sdf` give the planner, if any.
+    fn neural_obstacle(&self, task: &schrl::task::Task, seed: u64) -> Result<Option<NeuralSdf>> {
+        let net = match (self.obstacle, &self.obstacle_sdf) {
+            (Some(ObstacleChoice::Exact), Some(_)) => {
+                bail!("--obstacle-sdf gives the planner a neural SDF; it contradicts --obstacle exact")
+            }
+            (None | Some(ObstacleChoice::Exact), None) => return Ok(None),
+            (_, Some(path)) => store::sdf::load(path).map_err(super::store_error)?,
+            (Some(ObstacleChoice::Neural), None) => {
+                let cfg = SdfFitConfig { seed, ..SdfFitConfig::default() };
+                eprintln!(
+                    "fitting a neural SDF of the {} map ({} steps) for the planner",
+                    task.map.name(),
+                    cfg.steps
+                );
+                let (net, report) =
+                    NeuralSdf::fit(&task.map, &cfg).map_err(|e| anyhow::anyhow!("--obstacle neural: {e}"))?;
+                eprintln!(
+                    "mean abs error {:.4} m, sign agreement {:.4} ({:.4} near surfaces)",
+                    report.mean_abs_error, report.sign_agreement, report.sign_agreement_near
+                );
+                net
+            }
+        };
+        if net.map != task.map.name() {
+            bail!(
+                "--obstacle-sdf: the network learned the {} map; the {} task is on the {} map",
+                net.map,
+                task.name,
+                task.map.name()
+            );
+        }
+        Ok(Some(net))
     }
 
     /// Refuses flags given with a value other than the resumed run's saved one, naming
@@ -205,9 +252,34 @@ impl TrainArgs {
                 ("--freeze-controller", self.freeze_controller && !saved.joint.freeze_controller),
                 ("--goal-margin", differs(&self.goal_margin, &saved.joint.goal_margin)),
                 ("--safe-margin", differs(&self.safe_margin, &saved.joint.safe_margin)),
+                (
+                    "--obstacle",
+                    self.obstacle.is_some_and(|o| {
+                        (o == ObstacleChoice::Neural) != saved.joint.neural_obstacle.is_some()
+                    }),
+                ),
+                ("--obstacle-sdf", self.obstacle_sdf_differs(saved)?),
             ],
         )
     }
+}
+
+impl TrainArgs {
+    /// `true` when `--obstacle-sdf` names a network other than the saved run's.
+    fn obstacle_sdf_differs(&self, saved: &JointRunSettings) -> Result<bool> {
+        let Some(path) = &self.obstacle_sdf else { return Ok(false) };
+        let net = store::sdf::load(path).map_err(super::store_error)?;
+        Ok(saved.joint.neural_obstacle.as_ref() != Some(&net))
+    }
+}
+
+/// What the planner's `safe` measures obstacles with (`--obstacle`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum ObstacleChoice {
+    /// The map's exact signed distance.
+    Exact,
+    /// A neural SDF fitted to it.
+    Neural,
 }
 
 /// A setting out of range, named by its flag.

@@ -145,7 +145,8 @@ pub fn pretrain(
     let mut dropped = false;
     let retried = sat_of(&best) < SATISFYING && t.config.safe_margin > 0.0;
     if retried {
-        let own = t.task.with_goal_margin(t.config.goal_margin);
+        let own =
+            t.config.planned_task(&t.task, false).map_err(|e| candle_core::Error::Msg(e.to_string()))?;
         let fallback = best_candidate(&base, &own, cfg, progress, &mut |c| {
             scores.push(CandidateScore { with_safe_margin: false, ..c })
         })?;

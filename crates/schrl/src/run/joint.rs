@@ -35,8 +35,9 @@ use crate::run::RunError;
 use crate::run::episode::{Driver, drive};
 use crate::run::evaluate::reach_steps;
 use crate::run::execute::{Execution, Outcome, start_run, task_env};
-use crate::task::Task;
 use crate::task::along::ExecutionSpec;
+use crate::task::neural_sdf::NeuralSdf;
+use crate::task::{ObstacleModel, Task};
 
 /// Joint-training settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -78,6 +79,28 @@ pub struct JointConfig {
     /// used 0.
     #[serde(default)]
     pub safe_margin: f64,
+    /// The planner's `safe` measures obstacles with this network instead of the
+    /// map's exact distance (`None`, the default; see [`JointConfig::planned_task`]).
+    /// The paper's Drone planner saw a neural SDF of the duck (§3.1). Runs are judged
+    /// on the exact geometry either way.
+    #[serde(default)]
+    pub neural_obstacle: Option<NeuralSdf>,
+}
+
+impl JointConfig {
+    /// The task the planner plans for: `task` with the goal margin, the obstacle
+    /// model and, if `with_safe_margin`, the safe margin. Errors when the neural
+    /// obstacle learned another map.
+    pub fn planned_task(&self, task: &Task, with_safe_margin: bool) -> Result<Task, RunError> {
+        let margin = if with_safe_margin { self.safe_margin } else { 0.0 };
+        let planned = task.with_goal_margin(self.goal_margin).with_safe_margin(margin);
+        match &self.neural_obstacle {
+            None => Ok(planned),
+            Some(net) => planned
+                .with_obstacle(ObstacleModel::Neural(std::sync::Arc::new(net.clone())))
+                .map_err(|message| RunError::Setting { key: "neural_obstacle", message }),
+        }
+    }
 }
 
 impl Default for JointConfig {
@@ -91,6 +114,7 @@ impl Default for JointConfig {
             freeze_controller: false,
             goal_margin: 0.0,
             safe_margin: 0.0,
+            neural_obstacle: None,
         }
     }
 }
@@ -229,6 +253,9 @@ impl JointRunSettings {
             if !(metres >= 0.0 && metres.is_finite()) {
                 return Err(bad(name, format!("must be a non-negative number of metres, got {metres}")));
             }
+        }
+        if let Some(net) = &j.neural_obstacle {
+            net.check().map_err(|m| bad("neural_obstacle", m))?;
         }
         self.pretrain.validate().map_err(|e| SettingError::of_nested(&e, "pretrain.", "pretrain_"))?;
         self.cpg.validate().map_err(|e| SettingError::of_nested(&e, "cpg.", ""))
@@ -416,7 +443,7 @@ impl JointTrainer {
                 });
             }
         }
-        let planned = task.with_goal_margin(config.goal_margin).with_safe_margin(config.safe_margin);
+        let planned = config.planned_task(&task, true)?;
         let plan = PlanTrainer::new(planned, cpg)?
             .with_control_reward(PathLengthReward { weight: config.length_weight });
         let envs = (0..config.plan_batch).map(|_| task_env(robot, &task)).collect::<Result<Vec<_>, _>>()?;

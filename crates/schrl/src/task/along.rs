@@ -250,7 +250,12 @@ impl ExecutionSpec {
             .iter()
             .enumerate()
             .map(|(j, g)| (along_name(&g.name), Arc::new(Column(dim + j)) as Arc<dyn Predicate>));
-        let waypoints_only = Task { safe_along: super::SafeAlong::Waypoints, ..task.clone() };
+        // Judged on the exact geometry whatever the planner saw.
+        let waypoints_only = Task {
+            safe_along: super::SafeAlong::Waypoints,
+            obstacle: super::ObstacleModel::Exact,
+            ..task.clone()
+        };
         let spec = waypoints_only
             .predicates()
             .into_iter()

@@ -158,6 +158,21 @@ pub struct Task {
     pub steps_to_reach_at: Option<usize>,
     /// The TOML text it was loaded from (kept so runs can store their task).
     pub toml: String,
+    /// What `safe` measures obstacles with ([`ObstacleModel::Exact`] as loaded; see
+    /// [`Task::with_obstacle`]).
+    pub obstacle: ObstacleModel,
+}
+
+/// What a task's `safe` measures obstacles with. The paper's planner saw a neural
+/// SDF of the duck (§3.1, App. E); runs are always judged on the exact geometry
+/// ([`Task::execution_spec`], the simulator's collisions).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum ObstacleModel {
+    /// The map's exact signed distance (the sim crate's closed forms).
+    #[default]
+    Exact,
+    /// A network fitted to the map's distance ([`neural_sdf::NeuralSdf`]).
+    Neural(Arc<neural_sdf::NeuralSdf>),
 }
 
 /// A task file that cannot be used, naming the file and the problem.
@@ -458,6 +473,7 @@ impl Task {
             counter_from: t.counter_from,
             steps_to_reach_at: t.steps_to_reach_at,
             toml: toml_text.to_string(),
+            obstacle: ObstacleModel::Exact,
         })
     }
 
@@ -520,6 +536,22 @@ impl Task {
         Task { safe_radius: self.safe_radius + m, avoid_margin: self.avoid_margin + m, ..self.clone() }
     }
 
+    /// The task with `safe` measured by `obstacle` (the planner's view; judge runs
+    /// with the task as loaded). A network must have learned this task's map.
+    pub fn with_obstacle(&self, obstacle: ObstacleModel) -> Result<Task, String> {
+        if let ObstacleModel::Neural(net) = &obstacle
+            && net.map != self.map.name()
+        {
+            return Err(format!(
+                "the neural SDF learned the {} map; the {} task is on the {} map",
+                net.map,
+                self.name,
+                self.map.name()
+            ));
+        }
+        Ok(Task { obstacle, ..self.clone() })
+    }
+
     /// The parsed formula.
     pub fn formula(&self) -> Formula {
         self.formula.clone()
@@ -563,8 +595,13 @@ impl Task {
             .iter()
             .map(|g| (g.name.clone(), Arc::new(Ball::new(g.center.clone(), g.radius)) as Arc<dyn Predicate>))
             .collect();
-        let safe = MapClearance::new(self.map.clone(), self.safe_radius).along(self.safe_along);
-        out.push(("safe".into(), Arc::new(safe)));
+        let safe: Arc<dyn Predicate> = match &self.obstacle {
+            ObstacleModel::Exact => {
+                Arc::new(MapClearance::new(self.map.clone(), self.safe_radius).along(self.safe_along))
+            }
+            ObstacleModel::Neural(net) => Arc::new(net.clearance(self.safe_radius).along(self.safe_along)),
+        };
+        out.push(("safe".into(), safe));
         if let Some(step) = self.counter_from {
             out.push(("counter".into(), Arc::new(AfterStep { step, truth: COUNTER_TRUTH })));
         }

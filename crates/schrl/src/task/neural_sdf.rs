@@ -15,9 +15,13 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::sync::Arc;
+
 use serde::{Deserialize, Serialize};
 use sim::Map;
 use stl::Predicate;
+
+use super::SafeAlong;
 
 use crate::nn::adam::Adam;
 use crate::nn::mlp::{MlpCache, TanhMlp};
@@ -217,10 +221,32 @@ impl NeuralSdf {
         acts[n_layers][0]
     }
 
-    /// The learned signed distance at `p`.
+    /// The learned signed distance at `p` (the forward pass alone: segments sample
+    /// it tens of times per evaluation).
     pub fn distance(&self, p: &[f64]) -> f64 {
-        let mut g = vec![0.0; p.len()];
-        self.distance_and_grad(p, &mut g)
+        let s = &self.sizes;
+        let n_layers = s.len() - 1;
+        let mut input: Vec<f64> = p.iter().map(|v| v / self.input_scale).collect();
+        let mut out = Vec::with_capacity(s.iter().copied().max().unwrap_or(1));
+        let mut offset = 0;
+        for l in 0..n_layers {
+            let (fan_in, fan_out) = (s[l], s[l + 1]);
+            let w = &self.params[offset..offset + fan_in * fan_out];
+            let b = &self.params[offset + fan_in * fan_out..offset + fan_in * fan_out + fan_out];
+            offset += fan_in * fan_out + fan_out;
+            out.clear();
+            out.extend((0..fan_out).map(|j| {
+                let z = b[j] as f64
+                    + w[j * fan_in..(j + 1) * fan_in]
+                        .iter()
+                        .zip(&input)
+                        .map(|(w, a)| *w as f64 * a)
+                        .sum::<f64>();
+                if l + 1 < n_layers { z.tanh() } else { z }
+            }));
+            std::mem::swap(&mut input, &mut out);
+        }
+        input[0]
     }
 
     /// Checks that the network's shape is consistent (a file may say anything).
@@ -243,17 +269,62 @@ impl NeuralSdf {
     }
 
     /// This network as an STL predicate: `sdf(p) − radius` (clearance for a robot of
-    /// `radius`), with its exact input gradient.
-    pub fn clearance(self, radius: f64) -> NeuralClearance {
-        NeuralClearance { net: self, radius }
+    /// `radius`), with its exact input gradient; checked at waypoints (see
+    /// [`NeuralClearance::along`]).
+    pub fn clearance(self: &Arc<Self>, radius: f64) -> NeuralClearance {
+        NeuralClearance { net: Arc::clone(self), radius, along: SafeAlong::Waypoints }
     }
 }
 
+/// Spacing of the points at which [`NeuralClearance`] samples a segment (metres):
+/// half the thickness of the duck's thinnest part (its beak, 0.2 m). At most
+/// [`MAX_SEGMENT_SAMPLES`] points per segment.
+pub const SEGMENT_SAMPLE_SPACING: f64 = 0.1;
+
+/// Most points sampled on one segment (longer segments are sampled more sparsely).
+pub const MAX_SEGMENT_SAMPLES: usize = 64;
+
 /// A neural SDF bound as a predicate: clearance `sdf(p) − radius`.
+///
+/// Along segments the clearance of `a → b` is the smallest over points evenly spaced
+/// at most [`SEGMENT_SAMPLE_SPACING`] apart, ends included (a network has no closed
+/// form for a segment, unlike the exact maps' [`sim::Map::segment_sdf`]); its gradient
+/// is the network's at the smallest point, shared between the ends by the point's
+/// position (`1 − s` to `a`, `s` to `b`). Inside an obstacle that is the deepest
+/// sampled point's depth, not the exact maps' penetration depth. The sample count
+/// grows with the segment's length, so where it changes the value may step by the
+/// network's variation between neighbouring samples.
 #[derive(Clone, Debug)]
 pub struct NeuralClearance {
-    net: NeuralSdf,
+    net: Arc<NeuralSdf>,
     radius: f64,
+    along: SafeAlong,
+}
+
+impl NeuralClearance {
+    /// The same clearance, checked along segments or at waypoints.
+    pub fn along(self, along: SafeAlong) -> Self {
+        Self { along, ..self }
+    }
+
+    /// The segment `a → b`'s smallest sampled distance and where (`s` in [0, 1]).
+    fn segment_min(&self, a: &[f64], b: &[f64]) -> (f64, f64) {
+        let len = a.iter().zip(b).map(|(x, y)| (y - x) * (y - x)).sum::<f64>().sqrt();
+        let k = ((len / SEGMENT_SAMPLE_SPACING).ceil() as usize).clamp(1, MAX_SEGMENT_SAMPLES);
+        let mut p = vec![0.0; a.len()];
+        let (mut best, mut at) = (f64::INFINITY, 0.0);
+        for i in 0..=k {
+            let s = i as f64 / k as f64;
+            for (d, pd) in p.iter_mut().enumerate() {
+                *pd = a[d] + s * (b[d] - a[d]);
+            }
+            let v = self.net.distance(&p);
+            if v < best {
+                (best, at) = (v, s);
+            }
+        }
+        (best, at)
+    }
 }
 
 impl Predicate for NeuralClearance {
@@ -272,5 +343,36 @@ impl Predicate for NeuralClearance {
 
     fn required_dim(&self) -> usize {
         self.net.sizes[0]
+    }
+
+    fn value_on_path(&self, path: &[f64], dim: usize, t: usize) -> f64 {
+        if self.along == SafeAlong::Waypoints || t == 0 {
+            return self.value(t, &path[t * dim..(t + 1) * dim]);
+        }
+        self.segment_min(&path[(t - 1) * dim..t * dim], &path[t * dim..(t + 1) * dim]).0 - self.radius
+    }
+
+    fn value_and_grad_on_path(
+        &self,
+        path: &[f64],
+        dim: usize,
+        t: usize,
+        scale: f64,
+        grad: &mut [f64],
+    ) -> f64 {
+        if self.along == SafeAlong::Waypoints || t == 0 {
+            let at = t * dim..(t + 1) * dim;
+            return self.value_and_grad(t, &path[at.clone()], scale, &mut grad[at]);
+        }
+        let (a, b) = (&path[(t - 1) * dim..t * dim], &path[t * dim..(t + 1) * dim]);
+        let (_, s) = self.segment_min(a, b);
+        let p: Vec<f64> = a.iter().zip(b).map(|(x, y)| x + s * (y - x)).collect();
+        let mut g = vec![0.0; dim];
+        let v = self.net.distance_and_grad(&p, &mut g);
+        for k in 0..dim {
+            grad[(t - 1) * dim + k] += scale * (1.0 - s) * g[k];
+            grad[t * dim + k] += scale * s * g[k];
+        }
+        v - self.radius
     }
 }
