@@ -16,7 +16,7 @@ use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watche
 use sim::Robot;
 
 /// The settings keywords of `schrl.train`: `schrl train`'s flags with `_` for `-`.
-const SETTINGS: [&str; 21] = [
+const SETTINGS: [&str; 22] = [
     "steps",
     "target",
     "controller",
@@ -36,6 +36,7 @@ const SETTINGS: [&str; 21] = [
     "freeze_controller",
     "goal_margin",
     "safe_margin",
+    "obstacle_sdf",
     "eval_groups",
     "save_every",
 ];
@@ -73,6 +74,12 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
         "freeze_controller" => set(&mut j.freeze_controller, flag()?),
         "goal_margin" => set(&mut j.goal_margin, number()?),
         "safe_margin" => set(&mut j.safe_margin, number()?),
+        // `schrl train --obstacle-sdf`: the neural SDF (a `schrl sdf fit` file) the planner sees.
+        "obstacle_sdf" => {
+            let path = value.extract::<PathBuf>().map_err(|_| get("a path"))?;
+            let net = schrl::store::sdf::load(&path).map_err(|e| PyValueError::new_err(e.to_string()))?;
+            set(&mut j.neural_obstacle, Some(net))
+        }
         "eval_groups" => set(&mut s.eval_groups, count()?),
         "save_every" => set(&mut s.save_every, count()?),
         other => {
