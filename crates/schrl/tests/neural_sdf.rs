@@ -44,12 +44,13 @@ fn input_gradient_matches_finite_differences_and_flows_through_robustness() {
         let v = pred.value_and_grad(0, &p, 1.0, &mut g);
         assert!((v - (net.distance(&p) - 0.1)).abs() < 1e-12);
         for k in 0..2 {
-            let h = 1e-5;
+            // The network runs in f32 (the kernel it was fitted with): steps of 1e-3.
+            let h = 1e-3;
             let (mut a, mut b) = (p, p);
             a[k] += h;
             b[k] -= h;
             let fd = (pred.value(0, &a) - pred.value(0, &b)) / (2.0 * h);
-            assert!((fd - g[k]).abs() < 1e-5, "∂/∂x{k} at {p:?}: {} vs {fd}", g[k]);
+            assert!((fd - g[k]).abs() < 2e-3, "∂/∂x{k} at {p:?}: {} vs {fd}", g[k]);
         }
     }
     // Bound as `safe` in G safe over a 3-state path: the spec's gradient is the
@@ -115,13 +116,13 @@ fn neural_clearance_along_segments_follows_the_exact_segment_distance() {
     assert!(v > 0.0 && (v - exact).abs() < 0.15, "{v} vs exact {exact}");
     let mut g = [0.0; 6];
     let value = pred.value_and_grad_on_path(&past, 3, 1, 1.0, &mut g);
-    assert!((value - v).abs() < 1e-12);
+    assert!((value - v).abs() < 1e-5, "{value} vs {v}");
     for k in 0..6 {
         let (mut a, mut b) = (past, past);
-        a[k] += 1e-6;
-        b[k] -= 1e-6;
-        let fd = (pred.value_on_path(&a, 3, 1) - pred.value_on_path(&b, 3, 1)) / 2e-6;
-        assert!((fd - g[k]).abs() < 1e-4, "∂/∂x{k}: {} vs {fd}", g[k]);
+        a[k] += 1e-3;
+        b[k] -= 1e-3;
+        let fd = (pred.value_on_path(&a, 3, 1) - pred.value_on_path(&b, 3, 1)) / 2e-3;
+        assert!((fd - g[k]).abs() < 5e-3, "∂/∂x{k}: {} vs {fd}", g[k]);
     }
     for p in [[0.3, -1.2, 0.8], [2.0, 2.0, 2.0], [0.0, 0.0, 0.5]] {
         let mut g = [0.0; 3];
