@@ -253,9 +253,11 @@ fn a_waypoint_counts_as_reached_within_two_thirds_of_the_smallest_goal() {
 }
 
 /// Why Drone Loop is hard for the planner (README, *Car and Drone*): every waypoint
-/// must be in a goal, the straight segments from (−1, −1, 1) to the other goals
-/// pass through the duck, so the only plans that satisfy the spec as planned (0.3 m
-/// clearance) bounce between (2, 1, 1) and (1, 1, 2).
+/// must be in a goal, and with the planning margins (goal discs shrunk, 0.1 m more
+/// clearance) the straight segments between the goals' centres from (−1, −1, 1) pass
+/// through the duck, so among centre-to-centre plans only the bounce between
+/// (2, 1, 1) and (1, 1, 2) satisfies the spec as planned. (Without the margins,
+/// off-centre plans through (−1, −1, 1) exist: the gradient planner finds them.)
 #[test]
 fn drone_loop_can_only_bounce_between_two_goals() {
     let t = Task::builtin("drone", TaskKind::Loop).unwrap();
