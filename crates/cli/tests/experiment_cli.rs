@@ -69,7 +69,7 @@ fn every_experiment_runs_end_to_end_at_quick_size() {
     let expect = [
         ("controllers", vec!["general controller"; 3], "success rate"),
         ("table2", vec!["cpg", "pg"], "updates"),
-        ("table3-4", vec!["schrl"; 3], "satisfaction"),
+        ("table3-4", vec!["schrl", "schrl", "schrl", "schrl-neural-sdf"], "satisfaction"),
         ("table5", vec!["planning time"], "mip seconds per plan"),
         ("table6", vec!["4 options"], "never converged"),
         ("table7", vec!["soft", "hard"], "updates"),
@@ -92,9 +92,10 @@ fn every_experiment_runs_end_to_end_at_quick_size() {
             assert!(hash.len() == 40 && hash.chars().all(|c| c.is_ascii_hexdigit()), "{e}: {commit}");
         }
     }
-    // Table 3–4 covers the three native robots; Fig. 4 all four variants.
+    // Table 3–4 covers the three native robots, and the Drone with a neural SDF too;
+    // Fig. 4 all four variants.
     let robots: Vec<_> = results(&root.join("table3-4")).iter().map(|r| r["robot"].clone()).collect();
-    assert_eq!(robots, ["point", "car", "drone"]);
+    assert_eq!(robots, ["point", "car", "drone", "drone"]);
     assert!(results(&root.join("table3-4"))[0]["rows"]["schrl (sampled plans)"]["satisfaction"].is_number());
     // Fig. 4: its four variants, and (a) and (d) on sampled plans.
     let fig4 = &results(&root.join("fig4"))[0]["rows"];

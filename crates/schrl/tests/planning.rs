@@ -306,6 +306,44 @@ fn gradient_planner_solves_loop_by_redrawing_binding_waypoints() {
     assert!(!stuck.satisfied(), "robustness {}", stuck.robustness);
 }
 
+/// Regression: the gradient planner returned the first plan with ρ > 0, on the very
+/// edge of every margin, and its executed Loop plans collided at wall ends (Fig. 4 (c)).
+/// With a target it climbs on to `ρ ≥ target` in the same attempt; with target 0 it
+/// still stops at the first satisfying plan.
+#[test]
+fn gradient_planner_climbs_past_the_first_satisfying_plan_to_its_target() {
+    use rand::SeedableRng;
+    use schrl::plan::gradient_planner::{GradientPlannerConfig, plan};
+    let task = Task::point(TaskKind::Seq);
+    let spec = task.spec();
+    let run = |cfg: &GradientPlannerConfig, seed| {
+        plan(&task, &spec, &[1.5, -1.5], cfg, &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed)).unwrap()
+    };
+    let first = GradientPlannerConfig { target: 0.0, ..Default::default() };
+    let target = GradientPlannerConfig::default();
+    let eps = target.target;
+    assert!(eps > 0.0);
+    let mut edge = 0;
+    for seed in 0..4 {
+        let (a, b) = (run(&first, seed), run(&target, seed));
+        assert!(a.satisfied() && b.robustness >= eps, "seed {seed}: {} then {}", a.robustness, b.robustness);
+        assert_eq!(b.attempts, a.attempts, "seed {seed}: the climb stays in the satisfying attempt");
+        if a.robustness < eps {
+            assert!(b.iterations > a.iterations, "seed {seed}: climbed on");
+            edge += 1;
+        } else {
+            assert_eq!(b, a, "seed {seed}: a first plan at the target is the plan");
+        }
+    }
+    assert!(edge >= 2, "the first satisfying plans were already robust ({edge} of 4 below {eps})");
+    assert!(
+        GradientPlannerConfig { target: -0.1, ..Default::default() }
+            .validate()
+            .unwrap_err()
+            .starts_with("target")
+    );
+}
+
 /// The Fig. 6 ablation planners (plain GRU, MLP) sample, score and train like the
 /// GRU-ODE; the MLP has no memory, so its step depends on the current waypoint only.
 #[test]

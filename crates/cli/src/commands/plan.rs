@@ -94,18 +94,25 @@ pub struct GradientFlags {
     /// Let the gradient planner's waypoints leave the map's region.
     #[arg(long)]
     gradient_outside_region: bool,
+    /// Robustness at which the gradient planner stops improving a satisfying plan
+    /// (0: the first satisfying plan, as Leung et al.; default: the planning network's ε).
+    #[arg(long, default_value_t = GradientPlannerConfig::default().target)]
+    gradient_target: f64,
 }
 
 impl GradientFlags {
-    /// The gradient planner's settings.
-    pub fn config(&self) -> GradientPlannerConfig {
-        GradientPlannerConfig {
+    /// The gradient planner's settings, checked; errors name the flag.
+    pub fn config(&self) -> Result<GradientPlannerConfig> {
+        let c = GradientPlannerConfig {
             iterations: self.gradient_iterations,
             restarts: self.gradient_restarts,
             repair_every: self.gradient_repair_every,
             in_region: !self.gradient_outside_region,
+            target: self.gradient_target,
             ..GradientPlannerConfig::default()
-        }
+        };
+        c.validate().map_err(|e| anyhow::anyhow!("--gradient-{e}"))?;
+        Ok(c)
     }
 }
 
@@ -538,7 +545,7 @@ fn time(args: TimeArgs) -> Result<()> {
     }
     if args.planners.contains(&TimedPlanner::Gradient) {
         let bar = timing_bar(n, "gradient planner");
-        let cfg = args.gradient.config();
+        let cfg = args.gradient.config()?;
         let (mut secs, mut ok) = (Vec::with_capacity(n), 0);
         for s in &starts {
             let t0 = std::time::Instant::now();
@@ -548,7 +555,10 @@ fn time(args: TimeArgs) -> Result<()> {
             bar.inc(1);
         }
         bar.finish_and_clear();
-        let note = format!(" (at most {} attempts of {} steps)", cfg.restarts, cfg.iterations);
+        let note = format!(
+            " (at most {} attempts of {} steps, target ρ ≥ {})",
+            cfg.restarts, cfg.iterations, cfg.target
+        );
         report("gradient planner", "gradient", &secs, ok, &note);
     }
     if args.planners.contains(&TimedPlanner::Mip) {
@@ -626,7 +636,7 @@ fn compare(args: CompareArgs) -> Result<()> {
     let dim = task.map.dim();
     let length = |p: &[Vec<f64>]| p.windows(2).map(|w| dist(&w[0], &w[1])).sum::<f64>();
     let hard = Semantics::hard();
-    let gradient = args.gradient.config();
+    let gradient = args.gradient.config()?;
     for (i, (s, net)) in starts.iter().zip(&network).enumerate() {
         let net: Vec<Vec<f64>> = net.iter().map(|w| w.iter().map(|&x| x as f64).collect()).collect();
         let grad = gradient_planner::plan(task, &spec, s, &gradient, &mut rng)?;

@@ -500,7 +500,7 @@ pub fn eval(args: EvalArgs) -> Result<()> {
     }
     let plans = match (args.planner, args.sampled_plans) {
         (PlannerChoice::Gradient, _) => {
-            Plans::Gradient { task: t.plan.task(), config: args.gradient.config() }
+            Plans::Gradient { task: t.plan.task(), config: args.gradient.config()? }
         }
         (PlannerChoice::Mip, _) => Plans::Mip { task: t.plan.task(), config: args.mip.config()? },
         (PlannerChoice::Network, true) => Plans::Sampled(t.plan.planner()),

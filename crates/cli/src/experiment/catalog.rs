@@ -16,6 +16,16 @@ use super::{Cell, Experiment, Selection, Step};
 /// The five tasks of the paper.
 const TASKS: [&str; 5] = ["seq", "cover", "branch", "loop", "signal"];
 
+/// Table 3/4's method with a neural SDF as the planner's obstacle (`--obstacle
+/// neural`), the paper's Drone planner (§3.1); on the Drone only.
+const NEURAL_SDF: &str = "schrl-neural-sdf";
+
+/// Whether `method` runs on `robot` (the neural SDF method on the Drone only: the
+/// paper fitted one to the duck, not to walls).
+fn applies(method: &str, robot: &str) -> bool {
+    method != NEURAL_SDF || robot == "drone"
+}
+
 /// Robots, tasks and methods of an experiment, before selection.
 struct Axes {
     robots: &'static [&'static str],
@@ -32,7 +42,7 @@ fn axes(e: Experiment) -> Axes {
     let (robots, methods): (&[&str], &[&str]) = match e {
         Experiment::Table1 => (&["doggo"], &["schrl"]),
         Experiment::Table2 => (&["point"], &["cpg", "pg"]),
-        Experiment::Table34 => (&["point", "car", "drone"], &["schrl"]),
+        Experiment::Table34 => (&["point", "car", "drone"], &["schrl", NEURAL_SDF]),
         Experiment::Table5 => (&["point"], &["planners"]),
         Experiment::Table7 => (&["point"], &["soft", "hard"]),
         Experiment::Fig3 => (&["point"], &["schrl", "htltl", "tltl", "crm", "dhrm"]),
@@ -73,7 +83,7 @@ pub fn cells(e: Experiment, sel: &Selection) -> Result<Vec<Cell>> {
     for robot in &robots {
         for task in &tasks {
             for &seed in &sel.seeds {
-                for method in &methods {
+                for method in methods.iter().filter(|m| applies(m, robot)) {
                     let base = Base { robot, task, seed, quick: sel.quick };
                     let steps = steps(e, method, &base)?;
                     cells.push(Cell {
@@ -86,6 +96,9 @@ pub fn cells(e: Experiment, sel: &Selection) -> Result<Vec<Cell>> {
                 }
             }
         }
+    }
+    if cells.is_empty() {
+        bail!("--methods: {} runs on none of the robots chosen ({})", methods.join(", "), robots.join(", "));
     }
     Ok(cells)
 }
@@ -171,7 +184,8 @@ fn steps(e: Experiment, method: &str, b: &Base) -> Result<Vec<Step>> {
     }
     match e {
         Experiment::Table1 | Experiment::Table34 => {
-            steps.push(b.train(method, &[], "run"));
+            let extra: &[&str] = if method == NEURAL_SDF { &["--obstacle", "neural"] } else { &[] };
+            steps.push(b.train(method, extra, "run"));
             let mut flags = strings(&["--ckpt", "@run", "--sampled-plans"]);
             flags.extend(b.eval_sizes());
             steps.push(Step::once(&format!("{method} (sampled plans)"), "eval", flags));
@@ -293,6 +307,19 @@ mod tests {
         let quick = cells(Experiment::Table34, &sel(true)).unwrap();
         assert_eq!(quick[0].steps[0].command, ["control", "train"]);
         assert!(quick[0].steps[1].flags.windows(2).any(|w| w == ["--controller", "@general"]));
+    }
+
+    #[test]
+    fn the_neural_sdf_method_runs_on_the_drone_only() {
+        let all = cells(Experiment::Table34, &sel(false)).unwrap();
+        let neural: Vec<_> = all.iter().filter(|c| c.method == NEURAL_SDF).collect();
+        assert_eq!(neural.len(), 5 * 2);
+        assert!(neural.iter().all(|c| c.robot == "drone"));
+        assert!(neural[0].steps[0].flags.windows(2).any(|w| w == ["--obstacle", "neural"]));
+        let mut s = sel(false);
+        (s.robots, s.methods) = (Some(vec!["car".into()]), Some(vec![NEURAL_SDF.into()]));
+        let err = super::cells(Experiment::Table34, &s).unwrap_err().to_string();
+        assert!(err.contains("runs on none of the robots chosen (car)"), "{err}");
     }
 
     #[test]
