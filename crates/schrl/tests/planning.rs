@@ -306,10 +306,9 @@ fn gradient_planner_solves_loop_by_redrawing_binding_waypoints() {
     assert!(!stuck.satisfied(), "robustness {}", stuck.robustness);
 }
 
-/// Regression: the gradient planner returned the first plan with ρ > 0, on the very
-/// edge of every margin, and its executed Loop plans collided at wall ends (Fig. 4 (c)).
-/// With a target it climbs on to `ρ ≥ target` in the same attempt; with target 0 it
-/// still stops at the first satisfying plan.
+/// The gradient planner returns the first plan with ρ > 0 (Leung et al.), on the very
+/// edge of every margin; with a target (the network's ε here) it climbs on to
+/// `ρ ≥ target` in the same attempt.
 #[test]
 fn gradient_planner_climbs_past_the_first_satisfying_plan_to_its_target() {
     use rand::SeedableRng;
@@ -319,10 +318,10 @@ fn gradient_planner_climbs_past_the_first_satisfying_plan_to_its_target() {
     let run = |cfg: &GradientPlannerConfig, seed| {
         plan(&task, &spec, &[1.5, -1.5], cfg, &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed)).unwrap()
     };
-    let first = GradientPlannerConfig { target: 0.0, ..Default::default() };
-    let target = GradientPlannerConfig::default();
-    let eps = target.target;
-    assert!(eps > 0.0);
+    let first = GradientPlannerConfig::default();
+    assert_eq!(first.target, 0.0, "the default is the first satisfying plan");
+    let eps = CpgConfig::default().epsilon;
+    let target = GradientPlannerConfig { target: eps, ..first };
     let mut edge = 0;
     for seed in 0..4 {
         let (a, b) = (run(&first, seed), run(&target, seed));

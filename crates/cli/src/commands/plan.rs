@@ -94,8 +94,8 @@ pub struct GradientFlags {
     /// Let the gradient planner's waypoints leave the map's region.
     #[arg(long)]
     gradient_outside_region: bool,
-    /// Robustness at which the gradient planner stops improving a satisfying plan
-    /// (0: the first satisfying plan, as Leung et al.; default: the planning network's ε).
+    /// Robustness at which the gradient planner stops improving a satisfying plan (0:
+    /// the first satisfying plan, as Leung et al.; e.g. 0.05, the planning network's ε).
     #[arg(long, default_value_t = GradientPlannerConfig::default().target)]
     gradient_target: f64,
 }

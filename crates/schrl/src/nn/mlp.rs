@@ -193,7 +193,7 @@ impl TanhMlp {
         d_out: &[f32],
         grads: &mut [f32],
     ) {
-        self.backward_to(params, x, n, cache, d_out, grads, None);
+        self.backward_to(params, x, n, cache, d_out, Some(grads), None);
     }
 
     /// [`TanhMlp::backward`], also writing the gradient with respect to the inputs
@@ -211,7 +211,22 @@ impl TanhMlp {
         d_x: &mut [f32],
     ) {
         assert_eq!(d_x.len(), n * self.input_dim(), "input-gradient length");
-        self.backward_to(params, x, n, cache, d_out, grads, Some(d_x));
+        self.backward_to(params, x, n, cache, d_out, Some(grads), Some(d_x));
+    }
+
+    /// The gradient with respect to the inputs alone, after [`TanhMlp::forward`] on the
+    /// same `x`, into `d_x` (`n × input`): no parameter gradient is formed (a fitted
+    /// network used as a function, e.g. a neural SDF's `∇d(p)`).
+    pub fn input_gradient(
+        &self,
+        params: &[f32],
+        n: usize,
+        cache: &mut MlpCache,
+        d_out: &[f32],
+        d_x: &mut [f32],
+    ) {
+        assert_eq!(d_x.len(), n * self.input_dim(), "input-gradient length");
+        self.backward_to(params, &[], n, cache, d_out, None, Some(d_x));
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -222,10 +237,12 @@ impl TanhMlp {
         n: usize,
         cache: &mut MlpCache,
         d_out: &[f32],
-        grads: &mut [f32],
+        mut grads: Option<&mut [f32]>,
         d_x: Option<&mut [f32]>,
     ) {
-        assert_eq!(grads.len(), self.num_params(), "gradient slice length");
+        if let Some(g) = &grads {
+            assert_eq!(g.len(), self.num_params(), "gradient slice length");
+        }
         assert_eq!(d_out.len(), n * self.output_dim(), "output-gradient length");
         assert_eq!(cache.layers.len(), self.num_layers(), "backward needs a forward pass first");
         let mut delta = std::mem::take(&mut cache.delta);
@@ -236,12 +253,14 @@ impl TanhMlp {
             let (i, o) = (self.sizes[l], self.sizes[l + 1]);
             let (wr, br) = self.layer_ranges(l);
             let input: &[f32] = if l == 0 { x } else { &cache.layers[l - 1] };
-            // dW (o×i) += deltaᵀ (o×n) · input (n×i).
-            gemm((o, n, i), &delta, (1, o), input, (i, 1), 1.0, &mut grads[wr]);
-            let db = &mut grads[br];
-            for row in delta.chunks_exact(o) {
-                for (g, d) in db.iter_mut().zip(row) {
-                    *g += d;
+            if let Some(grads) = grads.as_deref_mut() {
+                // dW (o×i) += deltaᵀ (o×n) · input (n×i).
+                gemm((o, n, i), &delta, (1, o), input, (i, 1), 1.0, &mut grads[wr]);
+                let db = &mut grads[br];
+                for row in delta.chunks_exact(o) {
+                    for (g, d) in db.iter_mut().zip(row) {
+                        *g += d;
+                    }
                 }
             }
             if l > 0 {
@@ -292,6 +311,11 @@ mod tests {
             let fd = (loss(&up) - loss(&down)) / 2e-2;
             assert!((fd - dx[k] as f64).abs() < 2e-3, "input {k}: {fd} vs {}", dx[k]);
         }
+        // The input gradient alone is the same, and leaves no parameter gradient to form.
+        let mut alone = vec![0.0; 6];
+        mlp.forward(&params, &x, 2, &mut cache);
+        mlp.input_gradient(&params, 2, &mut cache, &w, &mut alone);
+        assert_eq!(alone, dx);
     }
 
     #[test]

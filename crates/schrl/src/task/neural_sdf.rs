@@ -196,8 +196,8 @@ impl NeuralSdf {
         let (mlp, x) = (self.mlp(), self.inputs(p));
         let mut cache = MlpCache::default();
         let y = mlp.forward(&self.params, &x, 1, &mut cache)[0];
-        let (mut unused, mut dx) = (vec![0.0f32; self.params.len()], vec![0.0f32; p.len()]);
-        mlp.backward_with_input(&self.params, &x, 1, &mut cache, &[1.0], &mut unused, &mut dx);
+        let mut dx = vec![0.0f32; p.len()];
+        mlp.input_gradient(&self.params, 1, &mut cache, &[1.0], &mut dx);
         for (g, d) in grad.iter_mut().zip(&dx) {
             *g = *d as f64 / self.input_scale;
         }
