@@ -70,7 +70,7 @@ fn every_experiment_runs_end_to_end_at_quick_size() {
         ("controllers", vec!["general controller"; 3], "success rate"),
         ("table2", vec!["cpg", "pg"], "updates"),
         ("table3-4", vec!["schrl", "schrl", "schrl", "schrl-neural-sdf"], "satisfaction"),
-        ("table5", vec!["planning time"], "mip seconds per plan"),
+        ("table5", vec!["planning time"], "mip plans satisfying"),
         ("table6", vec!["4 options"], "never converged"),
         ("table7", vec!["soft", "hard"], "updates"),
         ("fig3", vec!["schrl", "htltl", "tltl", "crm", "dhrm"], "final score"),
@@ -100,6 +100,11 @@ fn every_experiment_runs_end_to_end_at_quick_size() {
     // Fig. 4: its four variants, and (a) and (d) on sampled plans.
     let fig4 = &results(&root.join("fig4"))[0]["rows"];
     assert_eq!(fig4.as_object().unwrap().len(), 6);
+    // Table 5: two commands fill its one row (network and gradient, then the MIP).
+    let t5 = &results(&root.join("table5"))[0]["rows"]["planning time"];
+    for key in ["network seconds per plan", "gradient plans satisfying", "mip seconds per plan"] {
+        assert!(t5[key].is_number(), "{key}: {t5}");
+    }
     // Table 6: the conditioned controller and the sums over 1, 2 and 4 options.
     assert_eq!(results(&root.join("table6"))[0]["rows"].as_object().unwrap().len(), 4);
     for picture in ["fig3.png", "fig3.svg", "fig4.png", "table3-4.png"] {

@@ -10,7 +10,8 @@ fn last_value(out: &std::process::Output, key: &str) -> f64 {
     let text = String::from_utf8_lossy(&out.stdout);
     let line =
         text.lines().rev().find(|l| l.starts_with(key)).unwrap_or_else(|| panic!("no '{key}' in {text}"));
-    line[key.len()..].trim().parse().unwrap()
+    // The mean: the first number (`<mean> ± <std>` where a spread follows).
+    line[key.len()..].split_whitespace().next().unwrap().parse().unwrap()
 }
 
 #[test]
@@ -133,6 +134,7 @@ fn mip_plans_write_a_file_say_their_robustness_and_refuse_bad_input() {
         String::from_utf8_lossy(&o.stdout)
     );
     assert!(last_value(&o, "mip seconds per plan:") > 0.0);
+    assert_eq!(last_value(&o, "mip plans satisfying:"), 3.0);
     // A spec no plan satisfies: in two discs 4 m apart at the same waypoint.
     std::fs::write(dir.join("two.stl"), "F[1,1] a & F[1,1] b\n").unwrap();
     std::fs::write(

@@ -32,6 +32,29 @@ fn every_shipped_task_loads_from_its_files_and_matches_the_embedded_copy() {
     }
 }
 
+/// Point's Loop as the authors' MIP took it is shipped by name: its plans satisfy
+/// Loop (a corner cycle alternates), it loads as its file does, and only for the Point.
+#[test]
+fn loop_sequence_is_a_shipped_point_task_whose_plans_satisfy_loop() {
+    use sim::Robot;
+    let named = Task::resolve(None, "loop-sequence").unwrap();
+    let file = Task::from_file(&repo_tasks().join("point/loop-sequence.toml")).unwrap();
+    assert_eq!((named.formula.clone(), named.steps), (file.formula, file.steps));
+    // The corner cycle from the start room: l3, l2, l1, l0, l3, ….
+    let corners = [[2.0, -2.0], [2.0, 2.0], [-2.0, 2.0], [-2.0, -2.0]];
+    let mut path = vec![1.5, -1.5];
+    for i in 0..named.steps {
+        path.extend(corners[i % 4]);
+    }
+    let hard = stl::Semantics::hard();
+    assert!(named.spec().robustness(&path, &hard).unwrap() > 0.0, "the cycle satisfies the sequence");
+    let as_loop: Vec<f64> = path[..(Task::point(TaskKind::Loop).steps + 1) * 2].to_vec();
+    let looped = Task::point(TaskKind::Loop).spec().robustness(&as_loop, &hard);
+    assert!(looped.as_ref().is_ok_and(|r| *r > 0.0), "…and Loop as written: {looped:?}");
+    let err = Task::resolve(Some(Robot::Car), "loop-sequence").unwrap_err().to_string();
+    assert!(err.contains("unknown task 'loop-sequence'"), "{err}");
+}
+
 #[test]
 fn point_seq_is_the_papers_sequence() {
     let t = Task::point(TaskKind::Seq);

@@ -523,11 +523,8 @@ fn time(args: TimeArgs) -> Result<()> {
     let hard = Semantics::hard();
     let n = args.from.n;
     println!("task: {} (T = {}), {n} starts", task.name, task.steps);
-    // A line to read, and one for scripts (`<key> seconds per plan: <mean>`).
     let report = |name: &str, key: &str, seconds: &[f64], ok: usize, note: &str| {
-        let (m, s) = mean_std(seconds);
-        println!("{name}: {m:.3e} ± {s:.1e} s per plan, {ok}/{n} satisfy{note}");
-        println!("{key} seconds per plan: {m:.3e}");
+        print_timing(name, key, seconds, ok, n, note);
     };
 
     if args.planners.contains(&TimedPlanner::Network) {
@@ -768,9 +765,17 @@ fn mip_many(task: &Task, cfg: &MipConfig, args: &MipArgs) -> Result<()> {
     let starts: Vec<Vec<f64>> =
         task.sample_starts(&mut rng, args.n)?.to_dtype(candle_core::DType::F64)?.to_vec2()?;
     let t = MipTimes::of(task, &starts, cfg)?;
-    let (m, sd) = mean_std(&t.seconds);
     println!("task: {} (T = {}), {} starts (seed {})", task.name, task.steps, args.n, args.seed);
-    println!("MIP planner: {m:.3e} ± {sd:.1e} s per plan, {}/{} satisfy{}", t.satisfied, args.n, t.note(cfg));
-    println!("mip seconds per plan: {m:.3e}");
+    print_timing("MIP planner", "mip", &t.seconds, t.satisfied, args.n, &t.note(cfg));
     Ok(())
+}
+
+/// A planner's times from `n` starts: a line to read, and lines for scripts and
+/// experiment records (`<key> seconds per plan: <mean> ± <std>`, `<key> plans
+/// satisfying: <count>`).
+fn print_timing(name: &str, key: &str, seconds: &[f64], ok: usize, n: usize, note: &str) {
+    let (m, s) = mean_std(seconds);
+    println!("{name}: {m:.3e} ± {s:.1e} s per plan, {ok}/{n} satisfy{note}");
+    println!("{key} seconds per plan: {m:.3e} ± {s:.3e}");
+    println!("{key} plans satisfying: {ok}");
 }

@@ -158,7 +158,8 @@ pub fn run_cell(
             {
                 metrics.insert("final score".into(), score);
             }
-            rows.insert(row.clone(), metrics);
+            // Steps may share a row (Table 5 times its planners in two commands).
+            rows.entry(row.clone()).or_insert_with(std::collections::BTreeMap::new).extend(metrics);
         }
         commands.push(typed);
     }

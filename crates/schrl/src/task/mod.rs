@@ -238,6 +238,16 @@ const BUILTIN: [(&str, &str, &str, &str); 20] = {
     [a, b, c, d, e, f, g, h, i, j, k, l, m, n, o, p, q, r, s, u]
 };
 
+/// Shipped task files beyond the paper's five, embedded, by name: `(robot, name, toml,
+/// spec)`. Point's Loop as the paper's authors re-encoded it for their MIP planner
+/// (App. J): the corners in a fixed cyclic order, whose plans satisfy Loop too.
+const EXTRA: [(&str, &str, &str, &str); 1] = [(
+    "point",
+    "loop-sequence",
+    include_str!("../../../../tasks/point/loop-sequence.toml"),
+    include_str!("../../../../tasks/point/loop-sequence.stl"),
+)];
+
 impl Task {
     /// The shipped task `kind` for `robot` (`point`, `car`, `doggo`, `drone`).
     pub fn builtin(robot: &str, kind: TaskKind) -> Result<Task, TaskError> {
@@ -256,17 +266,32 @@ impl Task {
     }
 
     /// The task a user names: a task file (`.toml`), whose robot it names, or a
-    /// built-in task name (`seq`, …) for `robot` (default: Point). A `robot` that
-    /// contradicts the file is refused.
+    /// built-in task name (`seq`, …, or a shipped extra such as Point's
+    /// `loop-sequence`) for `robot` (default: Point). A `robot` that contradicts the
+    /// file is refused.
     pub fn resolve(robot: Option<Robot>, task: &str) -> Result<Task, TaskError> {
+        let robot_name = robot.unwrap_or(Robot::Point).name();
         let t = if task.ends_with(".toml") {
             Task::from_file(Path::new(task))?
+        } else if let Some((r, name, toml_text, spec_text)) =
+            EXTRA.iter().find(|(r, name, _, _)| *name == task && *r == robot_name)
+        {
+            let toml_path = PathBuf::from(format!("tasks/{r}/{name}.toml"));
+            Task::from_texts(&toml_path, toml_text, &toml_path.with_extension("stl"), spec_text)?
         } else {
-            let kind: TaskKind = task.parse().map_err(|e: String| TaskError {
-                path: PathBuf::from(task),
-                message: format!("{e}, or a task file ending in .toml"),
+            let kind: TaskKind = task.parse().map_err(|e: String| {
+                let extra: Vec<String> = EXTRA
+                    .iter()
+                    .filter(|(r, _, _, _)| *r == robot_name)
+                    .map(|(_, name, _, _)| format!("{name} ({robot_name})"))
+                    .collect();
+                let extra = if extra.is_empty() { String::new() } else { format!(", {}", extra.join(", ")) };
+                TaskError {
+                    path: PathBuf::from(task),
+                    message: format!("{e}{extra}, or a task file ending in .toml"),
+                }
             })?;
-            Task::builtin(robot.unwrap_or(Robot::Point).name(), kind)?
+            Task::builtin(robot_name, kind)?
         };
         match robot {
             Some(r) if t.robot != r => Err(TaskError {
