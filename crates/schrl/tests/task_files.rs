@@ -282,7 +282,7 @@ fn a_waypoint_counts_as_reached_within_two_thirds_of_the_smallest_goal() {
 /// (2, 1, 1) and (1, 1, 2) satisfies the spec as planned. (Without the margins,
 /// off-centre plans through (−1, −1, 1) exist: the gradient planner finds them.)
 #[test]
-fn drone_loop_can_only_bounce_between_two_goals() {
+fn drone_loop_can_only_bounce_between_two_goals_and_can_from_every_start() {
     let t = Task::builtin("drone", TaskKind::Loop).unwrap();
     let planned = t.with_goal_margin(0.6).with_safe_margin(0.1);
     let goals = [[2.0, 1.0, 1.0], [1.0, 1.0, 2.0], [-1.0, -1.0, 1.0]];
@@ -294,6 +294,32 @@ fn drone_loop_can_only_bounce_between_two_goals() {
     assert!(bounce(0, 2) < -0.3 && bounce(1, 2) < -0.3, "{} {}", bounce(0, 2), bounce(1, 2));
     let cycle: Vec<f64> = (0..=t.steps).flat_map(|k| goals[k % 3]).collect();
     assert!(planned.spec().robustness(&cycle, &stl::Semantics::hard()).unwrap() < 0.0);
+    // From every corner of the start region one of the two bounces satisfies the task
+    // with the goal margin and the task's own clearance (what pre-training falls back
+    // to), and from all but the corner nearest the duck's head with the 0.1 m safe
+    // margin too: the task is feasible, and planners that miss the bounce fail at
+    // search, not at the task.
+    let own = t.with_goal_margin(0.6);
+    let mut with_margin = 0;
+    for corner in 0..8 {
+        let start: Vec<f64> =
+            (0..3).map(|d| if corner >> d & 1 == 0 { t.start.0[d] } else { t.start.1[d] }).collect();
+        let best = |task: &Task| {
+            [0, 1]
+                .map(|first| {
+                    let mut plan = start.clone();
+                    plan.extend(
+                        (1..=t.steps).flat_map(|k| goals[if k % 2 == 1 { first } else { 1 - first }]),
+                    );
+                    task.spec().robustness(&plan, &stl::Semantics::hard()).unwrap()
+                })
+                .into_iter()
+                .fold(f64::NEG_INFINITY, f64::max)
+        };
+        assert!(best(&own) > 0.0, "from {start:?}: {}", best(&own));
+        with_margin += (best(&planned) > 0.0) as usize;
+    }
+    assert_eq!(with_margin, 7);
 }
 
 #[test]
