@@ -343,6 +343,31 @@ fn gradient_planner_climbs_past_the_first_satisfying_plan_to_its_target() {
     );
 }
 
+/// Drone Loop with the joint run's margins is satisfiable only by bouncing between two
+/// goals. Waypoints drawn in the region (and redrawn there by repairs) never found the
+/// bounce; drawn at goal centres, the search is over which goal each waypoint visits.
+#[test]
+fn gradient_planner_finds_drone_loops_bounce_by_drawing_at_goal_centres() {
+    use rand::SeedableRng;
+    use schrl::plan::gradient_planner::{GradientPlannerConfig, WaypointDraw, plan};
+    let task = Task::builtin("drone", TaskKind::Loop).unwrap().with_goal_margin(0.6);
+    let spec = task.spec();
+    let cfg = GradientPlannerConfig { iterations: 2000, restarts: 2, ..Default::default() };
+    let centres = GradientPlannerConfig { draw: WaypointDraw::GoalCentres, ..cfg };
+    let start = [1.5, -1.5, 1.0];
+    let run = |cfg: &GradientPlannerConfig, seed| {
+        plan(&task, &spec, &start, cfg, &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed)).unwrap()
+    };
+    let (mut found, mut region) = (0, 0);
+    for seed in 0..3 {
+        found += run(&centres, seed).satisfied() as usize;
+        region += run(&cfg, seed).satisfied() as usize;
+    }
+    assert!(found >= 2 && region == 0, "goal centres {found} of 3, region {region} of 3");
+    assert_eq!("goal-centres".parse::<WaypointDraw>(), Ok(WaypointDraw::GoalCentres));
+    assert!("centres".parse::<WaypointDraw>().unwrap_err().contains("region or goal-centres"));
+}
+
 /// The Fig. 6 ablation planners (plain GRU, MLP) sample, score and train like the
 /// GRU-ODE; the MLP has no memory, so its step depends on the current waypoint only.
 #[test]

@@ -9,7 +9,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use schrl::plan::cpg::{CpgConfig, Method, PlanTrainer};
 use schrl::plan::deployed::{DeployedPlanner, PlanScratch};
-use schrl::plan::gradient_planner::{self, GradientPlannerConfig};
+use schrl::plan::gradient_planner::{self, GradientPlannerConfig, WaypointDraw};
 use schrl::plan::mip::{self, MipConfig, MipSolver};
 use schrl::plan::planner::PlannerKind;
 use schrl::run::evaluate::mean_std;
@@ -98,6 +98,10 @@ pub struct GradientFlags {
     /// the first satisfying plan, as Leung et al.; e.g. 0.05, the planning network's ε).
     #[arg(long, default_value_t = GradientPlannerConfig::default().target)]
     gradient_target: f64,
+    /// Where the gradient planner draws initial and redrawn waypoints: region
+    /// (uniformly) or goal-centres (a random goal's centre).
+    #[arg(long, default_value = "region")]
+    gradient_draw: WaypointDraw,
 }
 
 impl GradientFlags {
@@ -109,6 +113,7 @@ impl GradientFlags {
             repair_every: self.gradient_repair_every,
             in_region: !self.gradient_outside_region,
             target: self.gradient_target,
+            draw: self.gradient_draw,
             ..GradientPlannerConfig::default()
         };
         c.validate().map_err(|e| anyhow::anyhow!("--gradient-{e}"))?;

@@ -6,7 +6,7 @@
 //! after `iterations` steps without success it restarts from new random waypoints,
 //! up to `restarts` times. The start waypoint is given, not planned.
 //!
-//! Three additions to plain gradient ascent, each switchable, each found where plain
+//! Four additions to plain gradient ascent, each switchable, each found where plain
 //! ascent fails or its plans fail (README *Deployed plans and the gradient planner*);
 //! the first two are on by default:
 //! - *Region:* every step projects the waypoints back into the map's region; without
@@ -26,6 +26,9 @@
 //!   (Fig. 4 (c), seed 3) a target of ε lifted executed satisfaction from 0.346 to
 //!   0.416: the failures are not margins but 180° turns between two adjacent corners,
 //!   whose swings reach the outer walls (README).
+//! - *Draw* (region by default): waypoints are drawn, at the start of an attempt and
+//!   on a repair, uniformly in the region or at a random goal's centre
+//!   ([`WaypointDraw`]).
 //!
 //! Defaults (this project's; the paper gives none): Adam step 0.1, β (0.9, 0.999),
 //! soft STL with α = 10 (the training semantics of [`crate::plan::cpg::CpgConfig`]);
@@ -59,6 +62,35 @@ pub struct GradientPlannerConfig {
     /// Hard robustness that ends the search once a plan satisfies (0: the first
     /// satisfying plan, the default).
     pub target: f64,
+    /// Where initial and redrawn waypoints are drawn.
+    pub draw: WaypointDraw,
+}
+
+/// Where the gradient planner draws a waypoint (at the start of an attempt, and on a
+/// repair).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum WaypointDraw {
+    /// Uniformly in the map's region (the default).
+    #[default]
+    Region,
+    /// At the centre of a goal chosen uniformly (the region when the task has no
+    /// goals): a discrete search over which goal each waypoint visits, which ascent
+    /// then refines. Drone Loop's only satisfying plans with the planning margins
+    /// bounce between two goals; drawn in the region, repairs found that bounce from
+    /// none of 10 starts.
+    GoalCentres,
+}
+
+impl std::str::FromStr for WaypointDraw {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "region" => Ok(WaypointDraw::Region),
+            "goal-centres" => Ok(WaypointDraw::GoalCentres),
+            other => Err(format!("unknown waypoint draw '{other}': expected region or goal-centres")),
+        }
+    }
 }
 
 impl Default for GradientPlannerConfig {
@@ -71,6 +103,7 @@ impl Default for GradientPlannerConfig {
             in_region: true,
             repair_every: 20,
             target: 0.0,
+            draw: WaypointDraw::Region,
         }
     }
 }
@@ -144,7 +177,12 @@ pub fn plan(
     let mut ev = spec.evaluator();
     let mut grad = vec![0.0; n];
     for attempt in 1..=cfg.restarts.max(1) {
-        let mut path: Vec<f64> = (0..n).map(|i| rng.random_range(lo[i % dim]..hi[i % dim])).collect();
+        // Every waypoint drawn, the start too (then given): the random stream of
+        // region draws is the one this planner has always used.
+        let mut path = vec![0.0; n];
+        for w in path.chunks_mut(dim) {
+            draw_waypoint(task, cfg.draw, w, rng);
+        }
         path[..dim].copy_from_slice(start);
         let (mut m, mut v) = (vec![0.0; n], vec![0.0; n]);
         // The most robust satisfying plan of this attempt, once there is one.
@@ -181,7 +219,7 @@ pub fn plan(
                     break;
                 }
                 if repair && rho <= 0.0 {
-                    redraw_a_binding_waypoint(&mut ev, &mut path, dim, (&lo, &hi), rng, &mut grad)?;
+                    redraw_a_binding_waypoint(&mut ev, &mut path, task, cfg.draw, rng, &mut grad)?;
                     for k in (0..n).filter(|&k| grad[k] != 0.0) {
                         (m[k], v[k]) = (0.0, 0.0);
                     }
@@ -203,17 +241,34 @@ pub fn plan(
     Ok(best)
 }
 
-/// Draws afresh, uniformly in the region, one of the planned waypoints the hard
-/// robustness's subgradient moves (chosen uniformly among them), leaving in `grad`
-/// nonzero entries exactly at the redrawn waypoint's coordinates.
+/// Draws one waypoint `w` (`dim` numbers) as `draw` says.
+fn draw_waypoint(task: &Task, draw: WaypointDraw, w: &mut [f64], rng: &mut ChaCha8Rng) {
+    match draw {
+        WaypointDraw::GoalCentres if !task.goals.is_empty() => {
+            let goal = &task.goals[rng.random_range(0..task.goals.len())];
+            w.copy_from_slice(&goal.center);
+        }
+        _ => {
+            let (lo, hi) = task.map.region();
+            for (d, x) in w.iter_mut().enumerate() {
+                *x = rng.random_range(lo[d]..hi[d]);
+            }
+        }
+    }
+}
+
+/// Draws afresh (as `draw` says) one of the planned waypoints the hard robustness's
+/// subgradient moves (chosen uniformly among them), leaving in `grad` nonzero entries
+/// exactly at the redrawn waypoint's coordinates.
 fn redraw_a_binding_waypoint(
     ev: &mut Evaluator<'_>,
     path: &mut [f64],
-    dim: usize,
-    (lo, hi): (&[f64], &[f64]),
+    task: &Task,
+    draw: WaypointDraw,
     rng: &mut ChaCha8Rng,
     grad: &mut [f64],
 ) -> Result<(), EvalError> {
+    let dim = task.map.dim();
     grad.iter_mut().for_each(|g| *g = 0.0);
     ev.gradient(path, 0, &Semantics::hard(), grad)?;
     let binding: Vec<usize> =
@@ -223,9 +278,7 @@ fn redraw_a_binding_waypoint(
         return Ok(());
     }
     let w = binding[rng.random_range(0..binding.len())];
-    for d in 0..dim {
-        path[w * dim + d] = rng.random_range(lo[d]..hi[d]);
-        grad[w * dim + d] = 1.0;
-    }
+    draw_waypoint(task, draw, &mut path[w * dim..(w + 1) * dim], rng);
+    grad[w * dim..(w + 1) * dim].iter_mut().for_each(|g| *g = 1.0);
     Ok(())
 }
