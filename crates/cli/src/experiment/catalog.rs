@@ -275,6 +275,9 @@ pub const TABLE5_ROW: &str = "planning time";
 /// The robustness at which Table 5's MIP stops maximising (metres; `--robustness-cap`).
 pub const TABLE5_MIP_CAP: &str = "0.3";
 
+/// The report's heading of Table 5's MIP column, which names [`TABLE5_MIP_CAP`].
+pub const TABLE5_MIP_HEADING: &str = "MIP, robustness capped at 0.3 (s per plan)";
+
 /// The suffix of a row that executes sampled plans instead of mean paths.
 pub const SAMPLED: &str = " (sampled plans)";
 
@@ -341,6 +344,11 @@ mod tests {
             let expected = if task == "loop" { "loop-sequence" } else { task };
             assert_eq!(mip_task, expected);
         }
+    }
+
+    #[test]
+    fn table5s_mip_heading_names_its_cap() {
+        assert!(TABLE5_MIP_HEADING.contains(&format!("capped at {TABLE5_MIP_CAP} ")));
     }
 
     #[test]
