@@ -56,7 +56,7 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
     let j = &mut s.joint;
     Ok(match key {
         "steps" => set(&mut s.steps, count()?),
-        "target" => set(&mut s.target, number()?),
+        "target" => set(&mut s.target, Some(number()?)),
         "controller" => set(&mut s.controller, Some(value.extract::<PathBuf>().map_err(|_| get("a path"))?)),
         "semantics" => set(&mut s.cpg.semantics, parsed(key, &text()?)?),
         "planner" => set(&mut s.cpg.planner, parsed::<PlannerKind>(key, &text()?)?),
@@ -277,7 +277,7 @@ fn train<'py>(
         }
         let change = ResumeChanges {
             steps: Some(wanted.steps),
-            target: Some(wanted.target),
+            target: wanted.target,
             eval_groups: Some(wanted.eval_groups),
             save_every: Some(wanted.save_every),
         };

@@ -37,7 +37,7 @@ pub struct TrainArgs {
     #[arg(long)]
     steps: Option<usize>,
     /// Stop early once this fraction of the last 20 iterations' runs satisfy the task
-    /// [default: 0.97].
+    /// (default: train to the step budget).
     #[arg(long)]
     target: Option<f64>,
     /// Warm-start the controller from this `schrl control train` run (default: train a
@@ -90,7 +90,7 @@ pub struct TrainArgs {
     #[arg(long)]
     control_weight: Option<f64>,
     /// Weight per metre of the path-length term the planner follows in the joint phase
-    /// [default: 0.05].
+    /// [default: 0.2].
     #[arg(long)]
     length_weight: Option<f64>,
     /// Keep the controller fixed (ablation).
@@ -153,7 +153,7 @@ impl TrainArgs {
             }
         }
         set(&mut s.steps, self.steps);
-        set(&mut s.target, self.target);
+        set(&mut s.target, self.target.map(Some));
         s.controller.clone_from(&self.controller);
         let j = &mut s.joint;
         set(&mut j.plan_batch, self.plan_batch);
