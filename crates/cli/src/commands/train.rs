@@ -90,7 +90,7 @@ pub struct TrainArgs {
     #[arg(long)]
     control_weight: Option<f64>,
     /// Weight per metre of the path-length term the planner follows in the joint phase
-    /// [default: 0.2].
+    /// [default: 0.05].
     #[arg(long)]
     length_weight: Option<f64>,
     /// Keep the controller fixed (ablation).

@@ -52,13 +52,15 @@ pub struct JointConfig {
     /// recovered).
     pub control_weight: f64,
     /// Weight per metre of the path-length term the planner keeps following pathwise
-    /// in the joint phase (0.2, four times pre-training's). Continued training on the
-    /// spec's terms drifts the plans away from the short one pre-training kept: Point
-    /// Branch seed 0, trained to its budget, mean plans 9.76 m as pre-trained (the
-    /// frozen planner: 391.6 steps to reach), 10.41 m after the joint phase with
-    /// control weight 0 and 10.16 m with 0.3 at weight 0.05 (417.6 steps), 9.58 m at
-    /// 0.2 (391.6 steps). Earlier, Point Seq seed 0: 479 steps at 0.05, 503 without
-    /// the term. Runs saved before it existed used 0.
+    /// in the joint phase, as in pre-training (0.05, pre-training's; Point Seq seed 0:
+    /// without it the joint phase lengthened the deployed plans, 479 steps to reach
+    /// with it, 503 without, at control weight 0.3). Continued training still drifts
+    /// the plans from the short one pre-training kept (Point Branch seed 0 to its
+    /// budget: 9.76 m pre-trained, 10.16 m after, 417.6 steps to reach against the
+    /// frozen planner's 391.6). 0.2 held them (9.58 m, 391.6 steps) but pressed the
+    /// mean plans onto the constraint's edge: Branch seeds 1 and 2 fell to 0.946 and
+    /// 0.766 (waypoints 0.01–0.04 m outside the shrunk goal). Runs saved before it
+    /// existed used 0.
     #[serde(default)]
     pub length_weight: f64,
     /// Runs from each start in an iteration (4): `plan_batch` must be a multiple.
@@ -111,7 +113,7 @@ impl Default for JointConfig {
         Self {
             plan_batch: 8,
             control_weight: 0.3,
-            length_weight: 0.2,
+            length_weight: 0.05,
             runs_per_start: 4,
             freeze_planner: false,
             freeze_controller: false,
