@@ -237,7 +237,7 @@ impl RunSession {
             if trainer.iterations.is_multiple_of(s.save_every) {
                 self.run.save(|f| store::joint::save_into(f, &trainer))?;
             }
-            if target_met(s.target, recent) {
+            if target_met(s.target, recent.len(), satisfaction) {
                 stop = Stop::Target;
                 break;
             }
@@ -400,11 +400,11 @@ fn save_curve(history: &[JointMetrics], out: &Path) -> Result<(), RunError> {
     Ok(())
 }
 
-/// Whether the runs of `recent`, the last [`RECENT`] iterations, met the early-stop
-/// `target` on average (never without a target, the default).
-fn target_met(target: Option<f64>, recent: &[JointMetrics]) -> bool {
-    let satisfaction = recent.iter().map(|m| m.satisfaction).sum::<f64>() / recent.len().max(1) as f64;
-    target.is_some_and(|t| recent.len() == RECENT && satisfaction >= t)
+/// Whether `satisfaction`, the mean over the last `iterations` iterations' runs, meets
+/// the early-stop `target` over a full window of [`RECENT`] (never without a target,
+/// the default).
+fn target_met(target: Option<f64>, iterations: usize, satisfaction: f64) -> bool {
+    target.is_some_and(|t| iterations == RECENT && satisfaction >= t)
 }
 
 #[cfg(test)]
@@ -421,24 +421,9 @@ mod tests {
     fn runs_train_to_their_budget_unless_given_an_early_stop_target() {
         let s = settings();
         assert_eq!(s.target, None);
-        let m = JointMetrics {
-            iteration: 1,
-            env_steps: 1,
-            plan_rho: 0.1,
-            plan_satisfaction: 1.0,
-            satisfaction: 1.0,
-            steps_to_reach: Some(400.0),
-            lambda: 0.0,
-            plan_loss: None,
-            low_level_reward: -0.4,
-            score: None,
-            control: None,
-            steps_per_sec: 1.0,
-        };
-        let all = vec![m; RECENT];
-        assert!(!target_met(None, &all), "no target: never stop early");
-        assert!(target_met(Some(0.97), &all));
-        assert!(!target_met(Some(0.97), &all[1..]), "needs the last {RECENT} iterations");
+        assert!(!target_met(None, RECENT, 1.0), "no target: never stop early");
+        assert!(target_met(Some(0.97), RECENT, 1.0));
+        assert!(!target_met(Some(0.97), RECENT - 1, 1.0), "needs the last {RECENT} iterations");
         let mut text = serde_json::to_value(&s).unwrap();
         text["target"] = serde_json::json!(0.97);
         let saved: JointRunSettings = serde_json::from_value(text).unwrap();
