@@ -16,7 +16,7 @@ use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watche
 use sim::Robot;
 
 /// The settings keywords of `schrl.train`: `schrl train`'s flags with `_` for `-`.
-const SETTINGS: [&str; 22] = [
+const SETTINGS: [&str; 23] = [
     "steps",
     "target",
     "controller",
@@ -33,6 +33,7 @@ const SETTINGS: [&str; 22] = [
     "runs_per_start",
     "control_weight",
     "length_weight",
+    "anchor_weight",
     "freeze_controller",
     "goal_margin",
     "safe_margin",
@@ -59,7 +60,12 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
         "target" => set(&mut s.target, Some(number()?)),
         "controller" => set(&mut s.controller, Some(value.extract::<PathBuf>().map_err(|_| get("a path"))?)),
         "semantics" => set(&mut s.cpg.semantics, parsed(key, &text()?)?),
-        "planner" => set(&mut s.cpg.planner, parsed::<PlannerKind>(key, &text()?)?),
+        "planner" => {
+            let kind = parsed::<PlannerKind>(key, &text()?)?;
+            let changed = kind != s.cpg.planner;
+            s.set_planner(kind);
+            changed
+        }
         "plan_batch" => set(&mut j.plan_batch, count()?),
         "method" => set(&mut s.cpg.method, parsed::<Method>(key, &text()?)?),
         "pg_weight" => set(&mut s.cpg.pg_weight, number()?),
@@ -71,6 +77,7 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
         "runs_per_start" => set(&mut j.runs_per_start, count()?),
         "control_weight" => set(&mut j.control_weight, number()?),
         "length_weight" => set(&mut j.length_weight, number()?),
+        "anchor_weight" => set(&mut j.anchor_weight, number()?),
         "freeze_controller" => set(&mut j.freeze_controller, flag()?),
         "goal_margin" => set(&mut j.goal_margin, number()?),
         "safe_margin" => set(&mut j.safe_margin, number()?),
@@ -95,8 +102,15 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
 /// those that changed a value.
 fn apply_all(s: &mut JointRunSettings, settings: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<String>> {
     let mut changed = vec![];
-    for (key, value) in settings.into_iter().flat_map(|d| d.iter()) {
-        let key: String = key.extract()?;
+    let mut given = settings
+        .into_iter()
+        .flat_map(|d| d.iter())
+        .map(|(k, v)| Ok((k.extract::<String>()?, v)))
+        .collect::<PyResult<Vec<_>>>()?;
+    // The planner first: choosing one resets the anchor weight it cannot use, and a
+    // weight given beside it must win whatever the keywords' order.
+    given.sort_by_key(|(k, _)| k != "planner");
+    for (key, value) in given {
         if !value.is_none() && apply(s, &key, &value)? {
             changed.push(key);
         }

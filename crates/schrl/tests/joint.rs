@@ -292,3 +292,65 @@ fn pretraining_keeps_trying_while_no_candidate_has_found_the_task() {
     );
     assert!(kept.retried_without_safe_margin);
 }
+
+/// A joint trainer for Point `kind` whose planner was pre-trained (a third of the
+/// default's updates: a barely trained planner's joint phase moves it by metres, and
+/// an anchor's sudden pull then overshoots under Adam), the controller frozen (only
+/// the planner's drift matters here).
+fn pretrained(kind: TaskKind, cfg: JointConfig) -> JointTrainer {
+    use schrl::plan::pretrain::{PretrainConfig, pretrain};
+    let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
+    let cfg = JointConfig { freeze_controller: true, ..cfg };
+    let mut t =
+        JointTrainer::new(Task::point(kind), cfg, CpgConfig { seed: 1, ..CpgConfig::default() }, control)
+            .unwrap();
+    let pre = PretrainConfig { updates: 1000, candidates: 1, length_weight: 0.05 };
+    pretrain(&mut t, &pre, &mut |_| {}).unwrap().expect("a kept planner");
+    t
+}
+
+/// The trust region holds the joint phase's planner near its warm start: after the
+/// same iterations, the anchored planner's sampled waypoints lie nearer the warm
+/// start's than those of a planner anchored with a negligible weight (which measures
+/// the drift without holding it).
+#[test]
+fn an_anchored_planner_stays_near_its_warm_start() {
+    let drift = |anchor_weight: f64| -> f64 {
+        let mut t = pretrained(TaskKind::Seq, JointConfig { anchor_weight, ..JointConfig::default() });
+        let drifts: Vec<f64> = (0..20).map(|_| t.iterate().unwrap().plan_drift.expect("anchored")).collect();
+        drifts[10..].iter().sum::<f64>() / 10.0
+    };
+    let (free, held) = (drift(1e-9), drift(10.0));
+    assert!(free > 0.02, "the free planner did not move ({free} m): nothing was tested");
+    assert!(held < 0.7 * free, "anchored drift {held} m against free {free} m");
+}
+
+/// A run saved with its anchor resumes with it: the next iteration is the same.
+#[test]
+fn a_saved_anchored_run_resumes_with_its_anchor() {
+    use schrl::store::{Existing, RunKind, RunWriter};
+    let dir = std::env::temp_dir().join(format!("schrl-anchor-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut t = pretrained(TaskKind::Branch, JointConfig { anchor_weight: 5.0, ..JointConfig::default() });
+    t.iterate().unwrap();
+    let mut run = RunWriter::create(&dir, RunKind::Joint, &"test", Existing::Refuse).unwrap();
+    run.save(|f| schrl::store::joint::save_into(f, &t)).unwrap();
+    let mut resumed = schrl::store::joint::load(&dir).unwrap();
+    assert_eq!(resumed.plan.anchor(), t.plan.anchor());
+    let timeless = |mut m: schrl::run::joint::JointMetrics| {
+        m.steps_per_sec = 0.0;
+        m
+    };
+    assert_eq!(timeless(resumed.iterate().unwrap()), timeless(t.iterate().unwrap()));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn only_the_gru_ode_planner_can_be_anchored() {
+    use schrl::plan::planner::PlannerKind;
+    let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
+    let cfg = JointConfig { anchor_weight: 1.0, ..JointConfig::default() };
+    let cpg = CpgConfig { planner: PlannerKind::Mlp, ..CpgConfig::default() };
+    let err = JointTrainer::new(Task::point(TaskKind::Seq), cfg, cpg, control).err().unwrap().to_string();
+    assert!(err.contains("anchor_weight") && err.contains("mlp"), "{err}");
+}

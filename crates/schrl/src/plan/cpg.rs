@@ -248,6 +248,10 @@ pub struct UpdateStats {
     pub lambda: f64,
     /// The loss minimised.
     pub loss: f64,
+    /// Mean distance (metres) of the fresh batch's waypoints from the anchor's
+    /// waypoints for the same start and noise, when the planner is anchored
+    /// ([`PlanTrainer::anchor_here`]); `None` otherwise.
+    pub drift: Option<f64>,
 }
 
 /// Trains a [`PathPlanner`] on a task with the constrained policy gradient.
@@ -271,6 +275,20 @@ pub struct PlanTrainer {
     promising: bool,
     /// Re-initialisations so far.
     restarts: usize,
+    /// The joint phase's trust region, if any ([`PlanTrainer::anchor_here`]).
+    anchor: Option<Anchor>,
+}
+
+/// The planner a joint phase started from, which its paths are held near: the
+/// penalty `weight/2 · mean over the fresh batch of Σ_i ‖τ_i − τ_i^anchor‖²`, with
+/// `τ^anchor` the anchor's path from the same start with the same noise. Sharing the
+/// noise makes the penalty bound how far both the mean paths and the spread move
+/// (a coupling of the two path distributions, not a KL estimate from samples).
+#[derive(Clone, Debug)]
+struct Anchor {
+    net: GruOdeBackprop,
+    tape: Tape,
+    weight: f64,
 }
 
 /// The hand-written update's network and activations.
@@ -396,7 +414,58 @@ impl PlanTrainer {
             attempt_updates: 0,
             promising: false,
             restarts: 0,
+            anchor: None,
         })
+    }
+
+    /// Anchors the joint updates ([`PlanTrainer::update_joint`]) to the planner as it
+    /// is now, with penalty weight `weight` per square metre ([`Anchor`]); 0 removes
+    /// the anchor. Only the GRU-ODE (the hand-written update) can be anchored.
+    pub fn anchor_here(&mut self, weight: f64) -> Result<()> {
+        let params = match &self.fast {
+            Some(f) => f.net.params.clone(),
+            None if weight == 0.0 => Vec::new(),
+            None => candle_core::bail!(
+                "only the gru-ode planner can be anchored to its warm start; the {} planner trains \
+                 with anchor weight 0",
+                self.cfg.planner.name()
+            ),
+        };
+        self.restore_anchor(params, weight)
+    }
+
+    /// The anchor's parameters and weight, if anchored (to save a run).
+    pub fn anchor(&self) -> Option<(&[f32], f64)> {
+        self.anchor.as_ref().map(|a| (a.net.params.as_slice(), a.weight))
+    }
+
+    /// Anchors the joint updates to the planner of `params` (what
+    /// [`PlanTrainer::anchor`] returned), with `weight`; 0 removes the anchor.
+    pub fn restore_anchor(&mut self, params: Vec<f32>, weight: f64) -> Result<()> {
+        if !(weight >= 0.0 && weight.is_finite()) {
+            candle_core::bail!("the anchor weight must be a non-negative number, got {weight}");
+        }
+        if weight == 0.0 {
+            self.anchor = None;
+            return Ok(());
+        }
+        let Some(f) = &self.fast else {
+            candle_core::bail!(
+                "only the gru-ode planner can be anchored, this is the {}",
+                self.cfg.planner.name()
+            )
+        };
+        if params.len() != f.net.params.len() {
+            candle_core::bail!(
+                "anchor of {} parameters, the planner has {}",
+                params.len(),
+                f.net.params.len()
+            );
+        }
+        let mut net = f.net.clone();
+        net.params = params;
+        self.anchor = Some(Anchor { net, tape: Tape::default(), weight });
+        Ok(())
     }
 
     /// Re-initialisations made by the restart rule ([`CpgConfig::restart_after`]).
@@ -531,7 +600,11 @@ impl PlanTrainer {
         let fresh = if let Some(f) = &mut self.fast {
             let starts: Vec<f32> = self.task.sample_starts(&mut self.rng, n)?.flatten_all()?.to_vec1()?;
             let noise: Vec<f32> = self.task.sample_noise(&mut self.rng, n)?.flatten_all()?.to_vec1()?;
-            f.net.forward(Source::Sample { starts: &starts, noise: &noise }, n, self.task.steps, &mut f.tape);
+            let source = Source::Sample { starts: &starts, noise: &noise };
+            f.net.forward(source, n, self.task.steps, &mut f.tape);
+            if let Some(a) = &mut self.anchor {
+                a.net.forward(source, n, self.task.steps, &mut a.tape);
+            }
             let dims = (n, self.task.steps + 1, self.task.map.dim());
             let paths = Tensor::from_slice(&f.tape.paths, dims, &Device::Cpu)?;
             PlanBatch { log_prob: Tensor::zeros(n, DType::F32, &Device::Cpu)?, paths }
@@ -588,6 +661,7 @@ impl PlanTrainer {
             satisfaction: fraction_satisfied(&hard),
             lambda: self.lagrangian.lambda,
             loss: loss.to_dtype(DType::F64)?.to_scalar()?,
+            drift: None,
         })
     }
 
@@ -616,8 +690,27 @@ impl PlanTrainer {
         let rows = spec.start * per..spec.end * per;
         let mut total = vec![0.0; paths.len()];
         total[rows.clone()].iter_mut().zip(&drho[rows.clone()]).for_each(|(t, g)| *t = g * lambda);
-        self.control.add_gradient(&paths[rows.clone()], self.task.steps, dim, &mut total[rows]);
+        self.control.add_gradient(&paths[rows.clone()], self.task.steps, dim, &mut total[rows.clone()]);
         let n = spec.len() as f64;
+        // The anchor's penalty on the fresh rows (the joint phase's only; its tape
+        // holds the anchor's paths for their starts and noise).
+        let (mut penalty, mut drift) = (0.0, None);
+        if let (Terms::Joint { .. }, Some(a)) = (&terms, &self.anchor) {
+            let mut dist = 0.0;
+            let (ts, ps) = (total[rows.clone()].chunks_mut(dim), paths[rows.clone()].chunks(dim));
+            for ((t, p), r) in ts.zip(ps).zip(a.tape.paths.chunks(dim)) {
+                let mut sq = 0.0;
+                for j in 0..dim {
+                    let diff = p[j] - r[j] as f64;
+                    t[j] -= a.weight * diff;
+                    sq += diff * diff;
+                }
+                penalty += 0.5 * a.weight * sq / n;
+                dist += sq.sqrt();
+            }
+            // Starts coincide: the mean is over the planned waypoints.
+            drift = Some(dist / (n * self.task.steps as f64));
+        }
         let drho: Vec<f32> = total.iter().map(|g| (g / n) as f32).collect();
         let f = self.fast.as_mut().expect("fast update");
         let FastUpdate { net, tape, grad } = f;
@@ -635,7 +728,8 @@ impl PlanTrainer {
             mean_rho,
             satisfaction: fraction_satisfied(hard),
             lambda: self.lagrangian.lambda,
-            loss: -(surrogate + lambda * mean_rho),
+            loss: -(surrogate + lambda * mean_rho) + penalty,
+            drift,
         })
     }
 

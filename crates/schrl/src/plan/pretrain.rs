@@ -156,17 +156,19 @@ pub fn pretrain(
             dropped = true;
         }
     }
-    Ok(best.map(|c| {
-        let mut plan = c.trainer;
-        plan.set_control_reward(Box::new(PathLengthReward { weight: t.config.length_weight }));
-        t.plan = plan;
-        Pretrained {
-            satisfaction: c.satisfaction,
-            length: c.length,
-            retried_without_safe_margin: retried,
-            dropped_safe_margin: dropped,
-            candidates: scores,
-        }
+    let Some(c) = best else { return Ok(None) };
+    let mut plan = c.trainer;
+    plan.set_control_reward(Box::new(PathLengthReward { weight: t.config.length_weight }));
+    t.plan = plan;
+    // The kept planner is the warm start the joint phase's trust region holds to.
+    let anchor = if t.config.freeze_planner { 0.0 } else { t.config.anchor_weight };
+    t.plan.anchor_here(anchor)?;
+    Ok(Some(Pretrained {
+        satisfaction: c.satisfaction,
+        length: c.length,
+        retried_without_safe_margin: retried,
+        dropped_safe_margin: dropped,
+        candidates: scores,
     }))
 }
 

@@ -3,9 +3,13 @@
 //! `joint.json`: the task's two files, the joint and planner settings as they stand
 //! (pre-training may have dropped the safe margin, and picks the planner's seed), λ,
 //! the planner's optimiser and random stream, the joint loop's random stream, reward
-//! scaler and partial rollout, and the counters. Together they resume a run exactly.
+//! scaler and partial rollout, and the counters; with a trust region, the warm-start
+//! planner it holds to (`anchor.safetensors`). Together they resume a run exactly.
 
+use std::collections::HashMap;
 use std::path::Path;
+
+use candle_core::{Device, Tensor};
 
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -18,6 +22,7 @@ use crate::run::joint::{JointConfig, JointTrainer};
 use crate::task::Task;
 
 const STATE: &str = "joint.json";
+const ANCHOR: &str = "anchor.safetensors";
 
 /// The layout of `joint.json` this build writes and reads (files written before the
 /// field existed are this layout).
@@ -42,12 +47,22 @@ struct State {
     rng: ChaCha8Rng,
     scaler: RewardScaler,
     buffer: RolloutBuffer,
+    /// The anchor's weight, when the planner is anchored (its parameters in
+    /// [`ANCHOR`]); absent in runs saved before anchors existed.
+    #[serde(default)]
+    anchor_weight: Option<f64>,
 }
 
 /// Writes the joint trainer `t` into a save.
 pub fn save_into(files: &mut SaveFiles, t: &JointTrainer) -> Result<(), StoreError> {
     planner::save_weights(files, &t.plan)?;
     controller::save_into(files, &t.control)?;
+    let anchor = t.plan.anchor();
+    if let Some((params, _)) = anchor {
+        let tensors = Tensor::from_slice(params, params.len(), &Device::Cpu)
+            .map(|v| HashMap::from([("params".to_string(), v)]));
+        files.write_with(ANCHOR, |p| tensors.and_then(|t| candle_core::safetensors::save(&t, p)))?;
+    }
     let state = State {
         format: STATE_FORMAT,
         task_toml: t.task.toml.clone(),
@@ -60,6 +75,7 @@ pub fn save_into(files: &mut SaveFiles, t: &JointTrainer) -> Result<(), StoreErr
         rng: t.rng.clone(),
         scaler: t.scaler.clone(),
         buffer: t.buffer.clone(),
+        anchor_weight: anchor.map(|(_, w)| w),
     };
     files.json(STATE, &state)
 }
@@ -80,6 +96,19 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<JointTrainer, StoreError> {
     let mut t = JointTrainer::new(task, state.joint, state.cpg, control)
         .map_err(|e| invalid(&path, e.to_string()))?;
     planner::restore_trainer(ckpt, &mut t.plan, state.planner)?;
+    if let Some(weight) = state.anchor_weight {
+        let file = ckpt.file(ANCHOR)?;
+        let params = candle_core::safetensors::load(&file, &Device::Cpu)
+            .and_then(|m| match m.get("params") {
+                Some(v) => v.to_vec1::<f32>(),
+                None => candle_core::bail!("no tensor 'params'"),
+            })
+            .map_err(|e| invalid(&file, e.to_string()))?;
+        if let Some(x) = params.iter().find(|x| !x.is_finite()) {
+            return Err(invalid(&file, format!("the anchor holds {x}: the weights are not usable")));
+        }
+        t.plan.restore_anchor(params, weight).map_err(|e| invalid(&file, e.to_string()))?;
+    }
     t.rng = state.rng;
     t.scaler = state.scaler;
     t.buffer = state.buffer;
