@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use pyo3::exceptions::{PyFileExistsError, PyKeyboardInterrupt, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use schrl::plan::cpg::Method;
+use schrl::plan::cpg::{AnchorKind, Method};
 use schrl::plan::planner::PlannerKind;
 use schrl::run::joint::{JointMetrics, JointRunSettings};
 use schrl::store::{Existing, StoreError};
@@ -16,7 +16,7 @@ use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watche
 use sim::Robot;
 
 /// The settings keywords of `schrl.train`: `schrl train`'s flags with `_` for `-`.
-const SETTINGS: [&str; 23] = [
+const SETTINGS: [&str; 24] = [
     "steps",
     "target",
     "controller",
@@ -34,6 +34,7 @@ const SETTINGS: [&str; 23] = [
     "control_weight",
     "length_weight",
     "anchor_weight",
+    "anchor_on",
     "freeze_controller",
     "goal_margin",
     "safe_margin",
@@ -78,6 +79,7 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
         "control_weight" => set(&mut j.control_weight, number()?),
         "length_weight" => set(&mut j.length_weight, number()?),
         "anchor_weight" => set(&mut j.anchor_weight, number()?),
+        "anchor_on" => set(&mut j.anchor_on, parsed::<AnchorKind>(key, &text()?)?),
         "freeze_controller" => set(&mut j.freeze_controller, flag()?),
         "goal_margin" => set(&mut j.goal_margin, number()?),
         "safe_margin" => set(&mut j.safe_margin, number()?),

@@ -328,10 +328,12 @@ fn an_anchored_planner_stays_near_its_warm_start() {
 /// A run saved with its anchor resumes with it: the next iteration is the same.
 #[test]
 fn a_saved_anchored_run_resumes_with_its_anchor() {
+    use schrl::plan::cpg::AnchorKind;
     use schrl::store::{Existing, RunKind, RunWriter};
     let dir = std::env::temp_dir().join(format!("schrl-anchor-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let mut t = pretrained(TaskKind::Branch, JointConfig { anchor_weight: 5.0, ..JointConfig::default() });
+    let cfg = JointConfig { anchor_weight: 5.0, anchor_on: AnchorKind::Length, ..JointConfig::default() };
+    let mut t = pretrained(TaskKind::Branch, cfg);
     t.iterate().unwrap();
     let mut run = RunWriter::create(&dir, RunKind::Joint, &"test", Existing::Refuse).unwrap();
     run.save(|f| schrl::store::joint::save_into(f, &t)).unwrap();
@@ -353,4 +355,40 @@ fn only_the_gru_ode_planner_can_be_anchored() {
     let cpg = CpgConfig { planner: PlannerKind::Mlp, ..CpgConfig::default() };
     let err = JointTrainer::new(Task::point(TaskKind::Seq), cfg, cpg, control).err().unwrap().to_string();
     assert!(err.contains("anchor_weight") && err.contains("mlp"), "{err}");
+}
+
+/// Each trust region's gradient is its penalty's (finite differences), and the length
+/// one leaves a path alone while it is no longer than the warm start's.
+#[test]
+fn anchor_penalties_have_their_gradients_and_the_length_one_is_one_sided() {
+    use schrl::plan::cpg::AnchorKind;
+    let (steps, dim, w) = (3, 2, 10.0);
+    let anchored = [0.0, 0.0, 1.0, 0.0, 2.0, 0.5, 3.0, 0.0];
+    let longer = [0.0, 0.0, 1.2, 0.6, 2.1, -0.4, 3.3, 0.2];
+    for kind in [AnchorKind::Paths, AnchorKind::Length] {
+        let mut ascent = vec![0.0; longer.len()];
+        let (pen, _) = kind.penalty(w, &longer, &anchored, steps, dim, &mut ascent);
+        assert!(pen > 0.0, "{kind:?}");
+        for i in dim..longer.len() {
+            let h = 1e-6;
+            let (mut up, mut down) = (longer, longer);
+            up[i] += h;
+            down[i] -= h;
+            let mut scratch = vec![0.0; longer.len()];
+            let numeric = (kind.penalty(w, &up, &anchored, steps, dim, &mut scratch).0
+                - kind.penalty(w, &down, &anchored, steps, dim, &mut scratch).0)
+                / (2.0 * h);
+            assert!(
+                (ascent[i] + numeric).abs() < 1e-5,
+                "{kind:?} coordinate {i}: {} vs {numeric}",
+                -ascent[i]
+            );
+        }
+    }
+    // Moved but shorter (a straight line to the same end): no length penalty.
+    let straight = [0.0, 0.0, 1.0, 0.1, 2.0, -0.1, 3.0, 0.0];
+    let mut ascent = vec![0.0; straight.len()];
+    let (pen, dist) = AnchorKind::Length.penalty(w, &straight, &anchored, steps, dim, &mut ascent);
+    assert!(pen == 0.0 && ascent.iter().all(|g| *g == 0.0) && dist > 0.5);
+    assert!(AnchorKind::Paths.penalty(w, &straight, &anchored, steps, dim, &mut ascent).0 > 0.0);
 }

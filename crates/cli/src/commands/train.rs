@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use schrl::plan::cpg::Method;
+use schrl::plan::cpg::{AnchorKind, Method};
 use schrl::plan::planner::PlannerKind;
 use schrl::run::RunError;
 use schrl::run::evaluate::{
@@ -98,6 +98,10 @@ pub struct TrainArgs {
     /// 0 on the other robots and with other planners].
     #[arg(long)]
     anchor_weight: Option<f64>,
+    /// What the trust region holds: paths (the waypoints) or length (one-sided: plans
+    /// may not grow longer than the pre-trained planner's) [default: paths].
+    #[arg(long)]
+    anchor_on: Option<AnchorKind>,
     /// Keep the controller fixed (ablation).
     #[arg(long)]
     freeze_controller: bool,
@@ -182,6 +186,7 @@ impl TrainArgs {
             s.set_planner(kind);
         }
         set(&mut s.joint.anchor_weight, self.anchor_weight);
+        set(&mut s.joint.anchor_on, self.anchor_on);
         let p = &mut s.pretrain;
         set(&mut p.updates, self.pretrain_updates);
         set(&mut p.candidates, self.pretrain_candidates);
@@ -261,6 +266,7 @@ impl TrainArgs {
                 ("--control-weight", differs(&self.control_weight, &saved.joint.control_weight)),
                 ("--length-weight", differs(&self.length_weight, &saved.joint.length_weight)),
                 ("--anchor-weight", differs(&self.anchor_weight, &saved.joint.anchor_weight)),
+                ("--anchor-on", differs(&self.anchor_on, &saved.joint.anchor_on)),
                 ("--freeze-controller", self.freeze_controller && !saved.joint.freeze_controller),
                 ("--goal-margin", differs(&self.goal_margin, &saved.joint.goal_margin)),
                 ("--safe-margin", differs(&self.safe_margin, &saved.joint.safe_margin)),

@@ -249,7 +249,7 @@ pub struct UpdateStats {
     /// The loss minimised.
     pub loss: f64,
     /// Mean distance (metres) of the fresh batch's waypoints from the anchor's
-    /// waypoints for the same start and noise, when the planner is anchored
+    /// waypoints for the same start and noise (either [`AnchorKind`]), when the planner is anchored
     /// ([`PlanTrainer::anchor_here`]); `None` otherwise.
     pub drift: Option<f64>,
 }
@@ -279,16 +279,86 @@ pub struct PlanTrainer {
     anchor: Option<Anchor>,
 }
 
-/// The planner a joint phase started from, which its paths are held near: the
-/// penalty `weight/2 · mean over the fresh batch of Σ_i ‖τ_i − τ_i^anchor‖²`, with
-/// `τ^anchor` the anchor's path from the same start with the same noise. Sharing the
-/// noise makes the penalty bound how far both the mean paths and the spread move
-/// (a coupling of the two path distributions, not a KL estimate from samples).
+/// What a joint phase's trust region holds near the warm start
+/// ([`PlanTrainer::anchor_here`]). Either way the warm start's path `τ⁰` for a sampled
+/// path `τ` is its path from the same start with the same noise (a coupling of the two
+/// path distributions, not a KL estimate from samples), and the penalty is averaged
+/// over the fresh batch.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AnchorKind {
+    /// The waypoints: `weight/2 · Σ_i ‖τ_i − τ⁰_i‖²`. Holds the mean paths and their
+    /// spread, whatever way they would move.
+    #[default]
+    Paths,
+    /// The length, one-sided: `weight/2 · max(0, L(τ) − L(τ⁰))²`. The planner may
+    /// move and shorten its paths but not lengthen them past the warm start's.
+    Length,
+}
+
+impl AnchorKind {
+    /// The name `--anchor-on` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            AnchorKind::Paths => "paths",
+            AnchorKind::Length => "length",
+        }
+    }
+}
+
+impl std::str::FromStr for AnchorKind {
+    type Err = String;
+
+    /// `paths` or `length`.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "paths" => Ok(AnchorKind::Paths),
+            "length" => Ok(AnchorKind::Length),
+            other => Err(format!("unknown anchor '{other}': expected paths or length")),
+        }
+    }
+}
+
+impl AnchorKind {
+    /// The penalty of `path` against the warm start's `anchored` path (`[steps + 1][dim]`
+    /// each) with `weight`, its gradient subtracted from `ascent` (an ascent direction,
+    /// same layout), and the summed distance of the waypoints from the anchored ones.
+    pub fn penalty(
+        self,
+        weight: f64,
+        path: &[f64],
+        anchored: &[f64],
+        steps: usize,
+        dim: usize,
+        ascent: &mut [f64],
+    ) -> (f64, f64) {
+        let far: Vec<f64> = path.iter().zip(anchored).map(|(x, y)| x - y).collect();
+        let dist = far.chunks(dim).map(|d| d.iter().map(|v| v * v).sum::<f64>().sqrt()).sum();
+        let penalty = match self {
+            AnchorKind::Paths => {
+                ascent.iter_mut().zip(&far).for_each(|(t, d)| *t -= weight * d);
+                0.5 * weight * far.iter().map(|d| d * d).sum::<f64>()
+            }
+            AnchorKind::Length => {
+                let length = |q: &[f64]| -PathLengthReward { weight: 1.0 }.reward(q, steps, dim)[0];
+                let excess = (length(path) - length(anchored)).max(0.0);
+                if excess > 0.0 {
+                    PathLengthReward { weight: weight * excess }.add_gradient(path, steps, dim, ascent);
+                }
+                0.5 * weight * excess * excess
+            }
+        };
+        (penalty, dist)
+    }
+}
+
+/// The planner a joint phase started from, and how its paths are held near it.
 #[derive(Clone, Debug)]
 struct Anchor {
     net: GruOdeBackprop,
     tape: Tape,
     weight: f64,
+    kind: AnchorKind,
 }
 
 /// The hand-written update's network and activations.
@@ -419,9 +489,10 @@ impl PlanTrainer {
     }
 
     /// Anchors the joint updates ([`PlanTrainer::update_joint`]) to the planner as it
-    /// is now, with penalty weight `weight` per square metre ([`Anchor`]); 0 removes
-    /// the anchor. Only the GRU-ODE (the hand-written update) can be anchored.
-    pub fn anchor_here(&mut self, weight: f64) -> Result<()> {
+    /// is now: a penalty of `kind` with weight `weight` per square metre
+    /// ([`AnchorKind`]); 0 removes the anchor. Only the GRU-ODE (the hand-written
+    /// update) can be anchored.
+    pub fn anchor_here(&mut self, weight: f64, kind: AnchorKind) -> Result<()> {
         let params = match &self.fast {
             Some(f) => f.net.params.clone(),
             None if weight == 0.0 => Vec::new(),
@@ -431,17 +502,17 @@ impl PlanTrainer {
                 self.cfg.planner.name()
             ),
         };
-        self.restore_anchor(params, weight)
+        self.restore_anchor(params, weight, kind)
     }
 
-    /// The anchor's parameters and weight, if anchored (to save a run).
-    pub fn anchor(&self) -> Option<(&[f32], f64)> {
-        self.anchor.as_ref().map(|a| (a.net.params.as_slice(), a.weight))
+    /// The anchor's parameters, weight and kind, if anchored (to save a run).
+    pub fn anchor(&self) -> Option<(&[f32], f64, AnchorKind)> {
+        self.anchor.as_ref().map(|a| (a.net.params.as_slice(), a.weight, a.kind))
     }
 
     /// Anchors the joint updates to the planner of `params` (what
-    /// [`PlanTrainer::anchor`] returned), with `weight`; 0 removes the anchor.
-    pub fn restore_anchor(&mut self, params: Vec<f32>, weight: f64) -> Result<()> {
+    /// [`PlanTrainer::anchor`] returned), with `weight` and `kind`; 0 removes the anchor.
+    pub fn restore_anchor(&mut self, params: Vec<f32>, weight: f64, kind: AnchorKind) -> Result<()> {
         if !(weight >= 0.0 && weight.is_finite()) {
             candle_core::bail!("the anchor weight must be a non-negative number, got {weight}");
         }
@@ -464,7 +535,7 @@ impl PlanTrainer {
         }
         let mut net = f.net.clone();
         net.params = params;
-        self.anchor = Some(Anchor { net, tape: Tape::default(), weight });
+        self.anchor = Some(Anchor { net, tape: Tape::default(), weight, kind });
         Ok(())
     }
 
@@ -696,20 +767,16 @@ impl PlanTrainer {
         // holds the anchor's paths for their starts and noise).
         let (mut penalty, mut drift) = (0.0, None);
         if let (Terms::Joint { .. }, Some(a)) = (&terms, &self.anchor) {
-            let mut dist = 0.0;
-            let (ts, ps) = (total[rows.clone()].chunks_mut(dim), paths[rows.clone()].chunks(dim));
-            for ((t, p), r) in ts.zip(ps).zip(a.tape.paths.chunks(dim)) {
-                let mut sq = 0.0;
-                for j in 0..dim {
-                    let diff = p[j] - r[j] as f64;
-                    t[j] -= a.weight * diff;
-                    sq += diff * diff;
-                }
-                penalty += 0.5 * a.weight * sq / n;
-                dist += sq.sqrt();
+            let (mut dist, steps) = (0.0, self.task.steps);
+            let anchored = a.tape.paths.iter().map(|v| *v as f64).collect::<Vec<f64>>();
+            let (ts, ps) = (total[rows.clone()].chunks_mut(per), paths[rows.clone()].chunks(per));
+            for ((t, p), r) in ts.zip(ps).zip(anchored.chunks(per)) {
+                let (pen, d) = a.kind.penalty(a.weight, p, r, steps, dim, t);
+                penalty += pen / n;
+                dist += d;
             }
             // Starts coincide: the mean is over the planned waypoints.
-            drift = Some(dist / (n * self.task.steps as f64));
+            drift = Some(dist / (n * steps as f64));
         }
         let drho: Vec<f32> = total.iter().map(|g| (g / n) as f32).collect();
         let f = self.fast.as_mut().expect("fast update");

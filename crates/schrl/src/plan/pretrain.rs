@@ -162,7 +162,7 @@ pub fn pretrain(
     t.plan = plan;
     // The kept planner is the warm start the joint phase's trust region holds to.
     let anchor = if t.config.freeze_planner { 0.0 } else { t.config.anchor_weight };
-    t.plan.anchor_here(anchor)?;
+    t.plan.anchor_here(anchor, t.config.anchor_on)?;
     Ok(Some(Pretrained {
         satisfaction: c.satisfaction,
         length: c.length,

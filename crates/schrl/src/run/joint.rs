@@ -30,7 +30,7 @@ use crate::control::normalize::RewardScaler;
 use crate::control::policy::PolicyCache;
 use crate::control::ppo::{RolloutBuffer, UpdateStats as PpoStats};
 use crate::control::trainer::normalize_obs;
-use crate::plan::cpg::{CpgConfig, PathLengthReward, PlanTrainer};
+use crate::plan::cpg::{AnchorKind, CpgConfig, PathLengthReward, PlanTrainer};
 use crate::run::RunError;
 use crate::run::episode::{Driver, drive};
 use crate::run::evaluate::reach_steps;
@@ -71,6 +71,9 @@ pub struct JointConfig {
     /// be anchored.
     #[serde(default)]
     pub anchor_weight: f64,
+    /// What the trust region holds: the paths, or (one-sided) their length.
+    #[serde(default)]
+    pub anchor_on: AnchorKind,
     /// Runs from each start in an iteration (4): `plan_batch` must be a multiple.
     /// Each run's baseline is the mean `r_l` of the others from its start; with 1,
     /// the mean of the rest of the batch.
@@ -123,6 +126,7 @@ impl Default for JointConfig {
             control_weight: 0.3,
             length_weight: 0.05,
             anchor_weight: 0.0,
+            anchor_on: AnchorKind::Paths,
             runs_per_start: 4,
             freeze_planner: false,
             freeze_controller: false,

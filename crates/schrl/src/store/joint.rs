@@ -58,7 +58,7 @@ pub fn save_into(files: &mut SaveFiles, t: &JointTrainer) -> Result<(), StoreErr
     planner::save_weights(files, &t.plan)?;
     controller::save_into(files, &t.control)?;
     let anchor = t.plan.anchor();
-    if let Some((params, _)) = anchor {
+    if let Some((params, ..)) = anchor {
         let tensors = Tensor::from_slice(params, params.len(), &Device::Cpu)
             .map(|v| HashMap::from([("params".to_string(), v)]));
         files.write_with(ANCHOR, |p| tensors.and_then(|t| candle_core::safetensors::save(&t, p)))?;
@@ -75,7 +75,7 @@ pub fn save_into(files: &mut SaveFiles, t: &JointTrainer) -> Result<(), StoreErr
         rng: t.rng.clone(),
         scaler: t.scaler.clone(),
         buffer: t.buffer.clone(),
-        anchor_weight: anchor.map(|(_, w)| w),
+        anchor_weight: anchor.map(|(_, w, _)| w),
     };
     files.json(STATE, &state)
 }
@@ -107,7 +107,8 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<JointTrainer, StoreError> {
         if let Some(x) = params.iter().find(|x| !x.is_finite()) {
             return Err(invalid(&file, format!("the anchor holds {x}: the weights are not usable")));
         }
-        t.plan.restore_anchor(params, weight).map_err(|e| invalid(&file, e.to_string()))?;
+        let kind = t.config.anchor_on;
+        t.plan.restore_anchor(params, weight, kind).map_err(|e| invalid(&file, e.to_string()))?;
     }
     t.rng = state.rng;
     t.scaler = state.scaler;
