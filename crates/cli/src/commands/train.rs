@@ -99,7 +99,7 @@ pub struct TrainArgs {
     #[arg(long)]
     anchor_weight: Option<f64>,
     /// What the trust region holds: paths (the waypoints) or length (one-sided: plans
-    /// may not grow longer than the pre-trained planner's) [default: paths].
+    /// may not grow longer than the pre-trained planner's) [default: length].
     #[arg(long)]
     anchor_on: Option<AnchorKind>,
     /// Keep the controller fixed (ablation).

@@ -71,7 +71,9 @@ pub struct JointConfig {
     /// be anchored.
     #[serde(default)]
     pub anchor_weight: f64,
-    /// What the trust region holds: the paths, or (one-sided) their length.
+    /// What the trust region holds: the paths, or (one-sided) their length (a run's
+    /// default, [`JointRunSettings::for_task`]). Runs saved before it existed held
+    /// the paths.
     #[serde(default)]
     pub anchor_on: AnchorKind,
     /// Runs from each start in an iteration (4): `plan_batch` must be a multiple.
@@ -188,10 +190,12 @@ pub const DEFAULT_SAVE_EVERY: usize = 50;
 pub const DEFAULT_SAFE_MARGIN: f64 = 0.1;
 
 /// The trust region's weight a run of `robot` gets by default
-/// ([`JointConfig::anchor_weight`]): 10 on Point, chosen on Branch seed 0 (steps to
-/// reach 417.6 free, 404.8 at weight 1, 393.2 at 10; the frozen planner's 391.6; README,
-/// *Joint training*); 0 on the other robots, whose results were measured without
-/// one and on which no weight has been derived.
+/// ([`JointConfig::anchor_weight`], on the plans' length, [`AnchorKind::Length`]): 10
+/// on Point, chosen on Point's tuning seeds 0–4 (README, *Joint training*: held on the
+/// waypoints, weight 1 and 10 on Branch seed 0, 10 on Branch and Signal seeds 0–4, Loop
+/// and part of Cover; on the length, 10 on Branch and Cover seeds 0–4); 0 on the other
+/// robots, whose results were measured without one and on which no weight has been
+/// derived.
 pub fn default_anchor_weight(robot: Robot) -> f64 {
     match robot {
         Robot::Point => 10.0,
@@ -245,6 +249,7 @@ impl JointRunSettings {
                 goal_margin,
                 safe_margin: DEFAULT_SAFE_MARGIN,
                 anchor_weight: default_anchor_weight(task.robot),
+                anchor_on: AnchorKind::Length,
                 ..JointConfig::default()
             },
             cpg: CpgConfig { seed, ..CpgConfig::default() },
