@@ -94,12 +94,11 @@ pub struct TrainArgs {
     #[arg(long)]
     length_weight: Option<f64>,
     /// Weight per square metre of the trust region holding the joint phase's paths near
-    /// the pre-trained planner's (0: none; gru-ode planner only) [default: 10 on Point,
-    /// 0 on the other robots and with other planners].
+    /// the pre-trained planner's (0: none; gru-ode planner only) [default: 0].
     #[arg(long)]
     anchor_weight: Option<f64>,
     /// What the trust region holds: paths (the waypoints) or length (one-sided: plans
-    /// may not grow longer than the pre-trained planner's) [default: length].
+    /// may not grow longer than the pre-trained planner's) [default: paths].
     #[arg(long)]
     anchor_on: Option<AnchorKind>,
     /// Keep the controller fixed (ablation).
@@ -135,9 +134,7 @@ pub struct TrainArgs {
 
 impl TrainArgs {
     /// `schrl train`'s arguments for an HTLTL run (`schrl baseline train --algo
-    /// htltl`): SCHRL's defaults with the planner on the plain policy gradient, and
-    /// free: no trust region to its warm start, which under the plain policy gradient
-    /// mostly fails the spec (README, *Baselines*, measured so).
+    /// htltl`): SCHRL's defaults with the planner on the plain policy gradient.
     pub(crate) fn htltl(base: super::baseline::CommonArgs) -> Self {
         let super::baseline::CommonArgs { robot, task, seed, steps, run, eval_groups, save_every } = base;
         Self {
@@ -149,7 +146,6 @@ impl TrainArgs {
             eval_groups,
             save_every,
             method: Some(Method::Pg),
-            anchor_weight: Some(0.0),
             ..Self::default()
         }
     }

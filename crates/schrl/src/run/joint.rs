@@ -66,14 +66,14 @@ pub struct JointConfig {
     /// Weight per square metre of the trust region that holds the joint phase's
     /// sampled paths near the warm-start planner's paths from the same start and
     /// noise ([`PlanTrainer::anchor_here`]; set when pre-training keeps a planner).
-    /// 0 leaves the planner free (this struct's default, and runs saved before it
-    /// existed); a run's default is [`default_anchor_weight`]. Only the GRU-ODE can
-    /// be anchored.
+    /// 0 (the default, and runs saved before it existed) leaves the planner free: on
+    /// Point, weight 10 held Branch and Signal at the frozen planner's steps to reach
+    /// but cost Loop and Cover (README, *The trust region*). Only the GRU-ODE can be
+    /// anchored.
     #[serde(default)]
     pub anchor_weight: f64,
-    /// What the trust region holds: the paths, or (one-sided) their length (a run's
-    /// default, [`JointRunSettings::for_task`]). Runs saved before it existed held
-    /// the paths.
+    /// What the trust region holds: the paths (the default), or (one-sided) their
+    /// length.
     #[serde(default)]
     pub anchor_on: AnchorKind,
     /// Runs from each start in an iteration (4): `plan_batch` must be a multiple.
@@ -189,20 +189,6 @@ pub const DEFAULT_SAVE_EVERY: usize = 50;
 /// (Algorithm 1) and results*).
 pub const DEFAULT_SAFE_MARGIN: f64 = 0.1;
 
-/// The trust region's weight a run of `robot` gets by default
-/// ([`JointConfig::anchor_weight`], on the plans' length, [`AnchorKind::Length`]): 10
-/// on Point, chosen on Point's tuning seeds 0–4 (README, *Joint training*: held on the
-/// waypoints, weight 1 and 10 on Branch seed 0, 10 on Branch and Signal seeds 0–4, Loop
-/// and part of Cover; on the length, 10 on Branch and Cover seeds 0–4); 0 on the other
-/// robots, whose results were measured without one and on which no weight has been
-/// derived.
-pub fn default_anchor_weight(robot: Robot) -> f64 {
-    match robot {
-        Robot::Point => 10.0,
-        _ => 0.0,
-    }
-}
-
 /// A run setting out of range. `name` is the setting as a user gives it: the
 /// `schrl train` flag with `_` for `-` (`plan_batch` for `--plan-batch`), which is also
 /// the keyword of Python's `schrl.train`.
@@ -245,13 +231,7 @@ impl JointRunSettings {
             steps: DEFAULT_STEPS,
             target: None,
             controller: None,
-            joint: JointConfig {
-                goal_margin,
-                safe_margin: DEFAULT_SAFE_MARGIN,
-                anchor_weight: default_anchor_weight(task.robot),
-                anchor_on: AnchorKind::Length,
-                ..JointConfig::default()
-            },
+            joint: JointConfig { goal_margin, safe_margin: DEFAULT_SAFE_MARGIN, ..JointConfig::default() },
             cpg: CpgConfig { seed, ..CpgConfig::default() },
             pretrain: crate::plan::pretrain::PretrainConfig::default(),
             eval_groups: crate::run::evaluate::EVAL_GROUPS,
