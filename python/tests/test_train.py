@@ -71,6 +71,9 @@ def test_existing_runs_are_refused_resumed_or_replaced(general, tmp_path):
     ({"task": "nope"}, "task: nope: .*or a task file ending in .toml"),
     ({"task": None}, "task is required for a new run"),
     ({"robot": "boat"}, "robot: "),
+    ({"anchor_weight": -1.0}, "anchor_weight must be a non-negative number"),
+    ({"anchor_on": "knees"}, "anchor_on: unknown anchor 'knees'"),
+    ({"anchor_weight": 1.0, "planner": "mlp"}, "anchor_weight must be 0 with the mlp planner"),
 ])
 def test_bad_settings_are_named(tmp_path, kw, message):
     with pytest.raises(ValueError, match=message):
