@@ -96,6 +96,14 @@ impl ControlReward for NoControlReward {
     }
 }
 
+/// The length of one path (`[waypoints][dim]`, row-major): the sum of its segments.
+fn path_length(path: &[f64], dim: usize) -> f64 {
+    path.chunks(dim)
+        .zip(path.chunks(dim).skip(1))
+        .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt())
+        .sum()
+}
+
 /// `r_l = −weight · length(τ)`: shorter paths are easier to follow.
 #[derive(Clone, Copy, Debug)]
 pub struct PathLengthReward {
@@ -105,17 +113,7 @@ pub struct PathLengthReward {
 
 impl ControlReward for PathLengthReward {
     fn reward(&self, paths: &[f64], steps: usize, dim: usize) -> Vec<f64> {
-        paths
-            .chunks((steps + 1) * dim)
-            .map(|p| {
-                let len: f64 = p
-                    .chunks(dim)
-                    .zip(p.chunks(dim).skip(1))
-                    .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt())
-                    .sum();
-                -self.weight * len
-            })
-            .collect()
+        paths.chunks((steps + 1) * dim).map(|p| -self.weight * path_length(p, dim)).collect()
     }
 
     /// Pathwise, the length pulls each waypoint towards its neighbours. The score
@@ -299,16 +297,6 @@ pub enum AnchorKind {
     Length,
 }
 
-impl AnchorKind {
-    /// The name `--anchor-on` takes.
-    pub fn name(self) -> &'static str {
-        match self {
-            AnchorKind::Paths => "paths",
-            AnchorKind::Length => "length",
-        }
-    }
-}
-
 impl std::str::FromStr for AnchorKind {
     type Err = String;
 
@@ -343,8 +331,7 @@ impl AnchorKind {
                 0.5 * weight * far.iter().map(|d| d * d).sum::<f64>()
             }
             AnchorKind::Length => {
-                let length = |q: &[f64]| -PathLengthReward { weight: 1.0 }.reward(q, steps, dim)[0];
-                let excess = (length(path) - length(anchored)).max(0.0);
+                let excess = (path_length(path, dim) - path_length(anchored, dim)).max(0.0);
                 if excess > 0.0 {
                     PathLengthReward { weight: weight * excess }.add_gradient(path, steps, dim, ascent);
                 }
@@ -496,15 +483,7 @@ impl PlanTrainer {
     /// ([`AnchorKind`]); 0 removes the anchor. Only the GRU-ODE (the hand-written
     /// update) can be anchored.
     pub fn anchor_here(&mut self, weight: f64, kind: AnchorKind) -> Result<()> {
-        let params = match &self.fast {
-            Some(f) => f.net.params.clone(),
-            None if weight == 0.0 => Vec::new(),
-            None => candle_core::bail!(
-                "only the gru-ode planner can be anchored to its warm start; the {} planner trains \
-                 with anchor weight 0",
-                self.cfg.planner.name()
-            ),
-        };
+        let params = self.fast.as_ref().map(|f| f.net.params.clone()).unwrap_or_default();
         self.restore_anchor(params, weight, kind)
     }
 
