@@ -16,7 +16,7 @@ use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watche
 use sim::Robot;
 
 /// The settings keywords of `schrl.train`: `schrl train`'s flags with `_` for `-`.
-const SETTINGS: [&str; 24] = [
+const SETTINGS: [&str; 25] = [
     "steps",
     "target",
     "controller",
@@ -35,6 +35,7 @@ const SETTINGS: [&str; 24] = [
     "length_weight",
     "anchor_weight",
     "anchor_on",
+    "plan_step_limit",
     "freeze_controller",
     "goal_margin",
     "safe_margin",
@@ -80,6 +81,7 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
         "length_weight" => set(&mut j.length_weight, number()?),
         "anchor_weight" => set(&mut j.anchor_weight, number()?),
         "anchor_on" => set(&mut j.anchor_on, parsed::<AnchorKind>(key, &text()?)?),
+        "plan_step_limit" => set(&mut j.plan_step_limit, number()?),
         "freeze_controller" => set(&mut j.freeze_controller, flag()?),
         "goal_margin" => set(&mut j.goal_margin, number()?),
         "safe_margin" => set(&mut j.safe_margin, number()?),

@@ -74,6 +74,8 @@ def test_existing_runs_are_refused_resumed_or_replaced(general, tmp_path):
     ({"anchor_weight": -1.0}, "anchor_weight must be a non-negative number"),
     ({"anchor_on": "knees"}, "anchor_on: unknown anchor 'knees'"),
     ({"anchor_weight": 1.0, "planner": "mlp"}, "anchor_weight must be 0 with the mlp planner"),
+    ({"plan_step_limit": -0.1}, "plan_step_limit must be a non-negative number of metres"),
+    ({"plan_step_limit": 0.05, "planner": "mlp"}, "plan_step_limit must be 0 with the mlp planner"),
 ])
 def test_bad_settings_are_named(tmp_path, kw, message):
     with pytest.raises(ValueError, match=message):

@@ -348,13 +348,39 @@ fn a_saved_anchored_run_resumes_with_its_anchor() {
 }
 
 #[test]
-fn only_the_gru_ode_planner_can_be_anchored() {
+fn only_the_gru_ode_planner_can_be_anchored_or_bounded() {
     use schrl::plan::planner::PlannerKind;
-    let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
-    let cfg = JointConfig { anchor_weight: 1.0, ..JointConfig::default() };
-    let cpg = CpgConfig { planner: PlannerKind::Mlp, ..CpgConfig::default() };
-    let err = JointTrainer::new(Task::point(TaskKind::Seq), cfg, cpg, control).err().unwrap().to_string();
-    assert!(err.contains("anchor_weight") && err.contains("mlp"), "{err}");
+    for (key, cfg) in [
+        ("anchor_weight", JointConfig { anchor_weight: 1.0, ..JointConfig::default() }),
+        ("plan_step_limit", JointConfig { plan_step_limit: 0.05, ..JointConfig::default() }),
+    ] {
+        let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
+        let cpg = CpgConfig { planner: PlannerKind::Mlp, ..CpgConfig::default() };
+        let err = JointTrainer::new(Task::point(TaskKind::Seq), cfg, cpg, control).err().unwrap().to_string();
+        assert!(err.contains(key) && err.contains("mlp"), "{err}");
+    }
+}
+
+/// The step bound holds each joint update's move of the sampled waypoints to its
+/// limit (where the free planner's steps exceed it, so the bound had work to do),
+/// and shortens rather than drops the step.
+#[test]
+fn a_bounded_joint_update_moves_the_waypoints_at_most_its_limit() {
+    let steps = |plan_step_limit: f64| -> Vec<(f64, f64)> {
+        let mut t = pretrained(TaskKind::Seq, JointConfig { plan_step_limit, ..JointConfig::default() });
+        (0..10)
+            .map(|_| {
+                let m = t.iterate().unwrap();
+                (m.plan_step.expect("the planner trained"), m.plan_step_scale.expect("measured"))
+            })
+            .collect()
+    };
+    let free = steps(0.0);
+    let limit = free.iter().map(|s| s.0).fold(0.0, f64::max) / 2.0;
+    assert!(free.iter().all(|s| s.1 == 1.0), "an unbounded step was shortened: {free:?}");
+    let bounded = steps(limit);
+    assert!(bounded.iter().all(|s| s.0 <= limit), "limit {limit} m: {bounded:?}");
+    assert!(bounded.iter().any(|s| s.1 < 1.0 && s.1 > 0.0), "the bound never shortened a step: {bounded:?}");
 }
 
 /// Each trust region's gradient is its penalty's (finite differences), and the length

@@ -101,6 +101,10 @@ pub struct TrainArgs {
     /// may not grow longer than the pre-trained planner's) [default: paths].
     #[arg(long)]
     anchor_on: Option<AnchorKind>,
+    /// The most one planner update of the joint phase may move the sampled waypoints,
+    /// mean metres (0: unbounded; gru-ode planner only) [default: 0].
+    #[arg(long)]
+    plan_step_limit: Option<f64>,
     /// Keep the controller fixed (ablation).
     #[arg(long)]
     freeze_controller: bool,
@@ -183,6 +187,7 @@ impl TrainArgs {
         }
         set(&mut s.joint.anchor_weight, self.anchor_weight);
         set(&mut s.joint.anchor_on, self.anchor_on);
+        set(&mut s.joint.plan_step_limit, self.plan_step_limit);
         let p = &mut s.pretrain;
         set(&mut p.updates, self.pretrain_updates);
         set(&mut p.candidates, self.pretrain_candidates);
@@ -263,6 +268,7 @@ impl TrainArgs {
                 ("--length-weight", differs(&self.length_weight, &saved.joint.length_weight)),
                 ("--anchor-weight", differs(&self.anchor_weight, &saved.joint.anchor_weight)),
                 ("--anchor-on", differs(&self.anchor_on, &saved.joint.anchor_on)),
+                ("--plan-step-limit", differs(&self.plan_step_limit, &saved.joint.plan_step_limit)),
                 ("--freeze-controller", self.freeze_controller && !saved.joint.freeze_controller),
                 ("--goal-margin", differs(&self.goal_margin, &saved.joint.goal_margin)),
                 ("--safe-margin", differs(&self.safe_margin, &saved.joint.safe_margin)),

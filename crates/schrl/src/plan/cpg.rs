@@ -250,6 +250,10 @@ pub struct UpdateStats {
     /// waypoints for the same start and noise (either [`AnchorKind`]), when the planner is anchored
     /// ([`PlanTrainer::anchor_here`]); `None` otherwise.
     pub drift: Option<f64>,
+    /// How far the update moved the fresh batch's waypoints (mean metres, same starts
+    /// and noise before and after) and the fraction of Adam's step it kept under
+    /// [`PlanTrainer::limit_joint_step`]: joint updates of the GRU-ODE only.
+    pub step: Option<(f64, f64)>,
 }
 
 /// Trains a [`PathPlanner`] on a task with the constrained policy gradient.
@@ -275,6 +279,9 @@ pub struct PlanTrainer {
     restarts: usize,
     /// The joint phase's trust region, if any ([`PlanTrainer::anchor_here`]).
     anchor: Option<Anchor>,
+    /// The most one joint update may move the fresh batch's waypoints, mean metres
+    /// (0: unbounded; [`PlanTrainer::limit_joint_step`]).
+    joint_step_limit: f64,
 }
 
 /// What a joint phase's trust region holds near the warm start
@@ -356,6 +363,10 @@ struct FastUpdate {
     net: GruOdeBackprop,
     tape: Tape,
     grad: Vec<f32>,
+    /// The last joint update's fresh starts and noise, and a tape to replay them on
+    /// (the step measure, [`PlanTrainer::limit_joint_step`]).
+    fresh: (Vec<f32>, Vec<f32>),
+    probe: Tape,
 }
 
 impl FastUpdate {
@@ -364,7 +375,51 @@ impl FastUpdate {
             return Ok(None);
         }
         let net = GruOdeBackprop::from_varmap(varmap, cfg)?;
-        Ok(Some(Self { net, tape: Tape::default(), grad: Vec::new() }))
+        let (tape, probe) = (Tape::default(), Tape::default());
+        Ok(Some(Self { net, tape, grad: Vec::new(), fresh: Default::default(), probe }))
+    }
+    /// Shortens the step just taken from `before` until the last fresh batch's
+    /// waypoints move at most `limit` metres on average from `fresh` (their paths
+    /// before it; `[batch][steps + 1][dim]`); 0 leaves it whole. Returns the distance
+    /// moved and the fraction of the step kept. The distance is not linear in the
+    /// step: each retry rescales by what the last one measured (a hair short), and
+    /// after a few the step is dropped, so the bound always holds.
+    fn bound_step(
+        &mut self,
+        before: &[f32],
+        fresh: &[f32],
+        steps: usize,
+        dim: usize,
+        limit: f64,
+    ) -> (f64, f64) {
+        let full: Vec<f32> = self.net.params.iter().zip(before).map(|(p, b)| p - b).collect();
+        let (mut scale, mut moved) = (1.0, self.moved(fresh, steps, dim));
+        let mut tries = 0;
+        while limit > 0.0 && moved > limit {
+            tries += 1;
+            scale = if tries > 8 { 0.0 } else { scale * 0.99 * limit / moved };
+            let s = scale as f32;
+            self.net.params.iter_mut().zip(before).zip(&full).for_each(|((p, b), d)| *p = b + s * d);
+            moved = self.moved(fresh, steps, dim);
+        }
+        (moved, scale)
+    }
+
+    /// Mean distance of the last fresh batch's waypoints, replayed with the current
+    /// parameters, from `fresh`.
+    fn moved(&mut self, fresh: &[f32], steps: usize, dim: usize) -> f64 {
+        let (starts, noise) = (&self.fresh.0, &self.fresh.1);
+        let n = starts.len() / dim;
+        self.net.forward(Source::Sample { starts, noise }, n, steps, &mut self.probe);
+        let total: f64 = self
+            .probe
+            .paths
+            .chunks(dim)
+            .zip(fresh.chunks(dim))
+            .map(|(a, b)| a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>().sqrt())
+            .sum();
+        // Starts coincide: the mean is over the planned waypoints.
+        total / (n * steps) as f64
     }
 }
 
@@ -475,7 +530,32 @@ impl PlanTrainer {
             promising: false,
             restarts: 0,
             anchor: None,
+            joint_step_limit: 0.0,
         })
+    }
+
+    /// Bounds each joint update ([`PlanTrainer::update_joint`]): when Adam's step
+    /// would move the fresh batch's waypoints more than `metres` on average (same
+    /// starts and noise before and after), the step is shortened along its direction
+    /// until it does not (Adam's moments keep the full gradient). 0 removes the bound.
+    /// Only the GRU-ODE (the hand-written update) can be bounded.
+    ///
+    /// Why: a gradient larger than any in Adam's second-moment history moves every
+    /// parameter by up to about 3 learning rates at once; on Point a single such joint
+    /// update moved the waypoints 0.4–0.8 m, off the goals, and the planner did not
+    /// come back (README, *The trust region*).
+    pub fn limit_joint_step(&mut self, metres: f64) -> Result<()> {
+        if !(metres >= 0.0 && metres.is_finite()) {
+            candle_core::bail!("the joint step limit must be a non-negative number of metres, got {metres}");
+        }
+        if metres > 0.0 && self.fast.is_none() {
+            candle_core::bail!(
+                "only the gru-ode planner's joint step can be bounded, this is the {}",
+                self.cfg.planner.name()
+            );
+        }
+        self.joint_step_limit = metres;
+        Ok(())
     }
 
     /// Anchors the joint updates ([`PlanTrainer::update_joint`]) to the planner as it
@@ -660,6 +740,7 @@ impl PlanTrainer {
             }
             let dims = (n, self.task.steps + 1, self.task.map.dim());
             let paths = Tensor::from_slice(&f.tape.paths, dims, &Device::Cpu)?;
+            f.fresh = (starts, noise);
             PlanBatch { log_prob: Tensor::zeros(n, DType::F32, &Device::Cpu)?, paths }
         } else {
             self.sample(n)?
@@ -715,6 +796,7 @@ impl PlanTrainer {
             lambda: self.lagrangian.lambda,
             loss: loss.to_dtype(DType::F64)?.to_scalar()?,
             drift: None,
+            step: None,
         })
     }
 
@@ -762,10 +844,17 @@ impl PlanTrainer {
         }
         let drho: Vec<f32> = total.iter().map(|g| (g / n) as f32).collect();
         let f = self.fast.as_mut().expect("fast update");
-        let FastUpdate { net, tape, grad } = f;
-        net.backward(tape, &drho, &score32, grad);
-        self.adam.step(&mut net.params, grad, self.cfg.lr as f32, f32::INFINITY);
-        net.store(&self.varmap)?;
+        f.net.backward(&f.tape, &drho, &score32, &mut f.grad);
+        let before = f.net.params.clone();
+        self.adam.step(&mut f.net.params, &mut f.grad, self.cfg.lr as f32, f32::INFINITY);
+        let step = match &terms {
+            Terms::Joint { .. } => {
+                let fresh = paths[rows.clone()].iter().map(|v| *v as f32).collect::<Vec<f32>>();
+                Some(f.bound_step(&before, &fresh, self.task.steps, dim, self.joint_step_limit))
+            }
+            Terms::Batch { .. } => None,
+        };
+        f.net.store(&self.varmap)?;
         let mean_rho = rho[spec.clone()].iter().sum::<f64>() / n;
         let hard = &hard[spec];
         if self.cfg.method == Method::Cpg {
@@ -779,6 +868,7 @@ impl PlanTrainer {
             lambda: self.lagrangian.lambda,
             loss: -(surrogate + lambda * mean_rho) + penalty,
             drift,
+            step,
         })
     }
 

@@ -163,6 +163,7 @@ pub fn pretrain(
     // The kept planner is the warm start the joint phase's trust region holds to.
     let anchor = if t.config.freeze_planner { 0.0 } else { t.config.anchor_weight };
     t.plan.anchor_here(anchor, t.config.anchor_on)?;
+    t.plan.limit_joint_step(t.config.plan_step_limit)?;
     Ok(Some(Pretrained {
         satisfaction: c.satisfaction,
         length: c.length,

@@ -76,6 +76,13 @@ pub struct JointConfig {
     /// length.
     #[serde(default)]
     pub anchor_on: AnchorKind,
+    /// The most one planner update of the joint phase may move the sampled waypoints,
+    /// mean metres over a fresh batch with the same starts and noise before and after
+    /// ([`PlanTrainer::limit_joint_step`]): a trust region on each step rather than on
+    /// the distance from the warm start. 0 (the default, and runs saved before it
+    /// existed) leaves Adam's steps whole. Only the GRU-ODE can be bounded.
+    #[serde(default)]
+    pub plan_step_limit: f64,
     /// Runs from each start in an iteration (4): `plan_batch` must be a multiple.
     /// Each run's baseline is the mean `r_l` of the others from its start; with 1,
     /// the mean of the rest of the batch.
@@ -129,6 +136,7 @@ impl Default for JointConfig {
             length_weight: 0.05,
             anchor_weight: 0.0,
             anchor_on: AnchorKind::Paths,
+            plan_step_limit: 0.0,
             runs_per_start: 4,
             freeze_planner: false,
             freeze_controller: false,
@@ -240,11 +248,12 @@ impl JointRunSettings {
     }
 
     /// Sets the planner network; one that cannot be anchored (all but the GRU-ODE)
-    /// trains without the trust region (anchor weight 0).
+    /// trains without the trust regions (anchor weight and step limit 0).
     pub fn set_planner(&mut self, kind: crate::plan::planner::PlannerKind) {
         self.cpg.planner = kind;
         if kind != crate::plan::planner::PlannerKind::GruOde {
             self.joint.anchor_weight = 0.0;
+            self.joint.plan_step_limit = 0.0;
         }
     }
 
@@ -285,16 +294,23 @@ impl JointRunSettings {
                 return Err(bad(name, format!("must be a non-negative number, got {w}")));
             }
         }
-        if j.anchor_weight > 0.0 && self.cpg.planner != crate::plan::planner::PlannerKind::GruOde {
-            return Err(bad(
-                "anchor_weight",
-                format!(
-                    "must be 0 with the {} planner (only the gru-ode can be anchored)",
-                    self.cpg.planner.name()
-                ),
-            ));
+        let gru = self.cpg.planner == crate::plan::planner::PlannerKind::GruOde;
+        for (name, value) in [("anchor_weight", j.anchor_weight), ("plan_step_limit", j.plan_step_limit)] {
+            if value > 0.0 && !gru {
+                return Err(bad(
+                    name,
+                    format!(
+                        "must be 0 with the {} planner (only the gru-ode's updates can be bounded)",
+                        self.cpg.planner.name()
+                    ),
+                ));
+            }
         }
-        for (name, metres) in [("goal_margin", j.goal_margin), ("safe_margin", j.safe_margin)] {
+        for (name, metres) in [
+            ("goal_margin", j.goal_margin),
+            ("safe_margin", j.safe_margin),
+            ("plan_step_limit", j.plan_step_limit),
+        ] {
             if !(metres >= 0.0 && metres.is_finite()) {
                 return Err(bad(name, format!("must be a non-negative number of metres, got {metres}")));
             }
@@ -330,6 +346,14 @@ pub struct JointMetrics {
     /// start's, when anchored ([`JointConfig::anchor_weight`]).
     #[serde(default)]
     pub plan_drift: Option<f64>,
+    /// How far the planner update moved the sampled waypoints (mean metres, same
+    /// starts and noise before and after), when the planner trained.
+    #[serde(default)]
+    pub plan_step: Option<f64>,
+    /// The fraction of Adam's step the update kept under
+    /// [`JointConfig::plan_step_limit`] (1 when it was within it).
+    #[serde(default)]
+    pub plan_step_scale: Option<f64>,
     /// Mean low-level reward `r_l` of the runs ([`execution_reward`]).
     #[serde(default)]
     pub low_level_reward: f64,
@@ -488,17 +512,26 @@ impl JointTrainer {
                 });
             }
         }
-        if config.anchor_weight > 0.0 && cpg.planner != crate::plan::planner::PlannerKind::GruOde {
-            return Err(RunError::Setting {
-                key: "anchor_weight",
-                message: format!(
-                    "only the gru-ode planner can be anchored to its warm start; with the {} planner \
-                     set it to 0",
-                    cpg.planner.name()
-                ),
-            });
+        let gru = cpg.planner == crate::plan::planner::PlannerKind::GruOde;
+        for (key, value) in
+            [("anchor_weight", config.anchor_weight), ("plan_step_limit", config.plan_step_limit)]
+        {
+            if value > 0.0 && !gru {
+                return Err(RunError::Setting {
+                    key,
+                    message: format!(
+                        "only the gru-ode planner's joint updates can be bounded; with the {} planner \
+                         set it to 0",
+                        cpg.planner.name()
+                    ),
+                });
+            }
         }
-        for (key, metres) in [("goal_margin", config.goal_margin), ("safe_margin", config.safe_margin)] {
+        for (key, metres) in [
+            ("goal_margin", config.goal_margin),
+            ("safe_margin", config.safe_margin),
+            ("plan_step_limit", config.plan_step_limit),
+        ] {
             if !(metres >= 0.0 && metres.is_finite()) {
                 return Err(RunError::Setting {
                     key,
@@ -507,8 +540,9 @@ impl JointTrainer {
             }
         }
         let planned = config.planned_task(&task, true)?;
-        let plan = PlanTrainer::new(planned, cpg)?
+        let mut plan = PlanTrainer::new(planned, cpg)?
             .with_control_reward(PathLengthReward { weight: config.length_weight });
+        plan.limit_joint_step(config.plan_step_limit)?;
         let envs = (0..config.plan_batch).map(|_| task_env(robot, &task)).collect::<Result<Vec<_>, _>>()?;
         let mut scaler = RewardScaler::new(config.plan_batch, control.config.ppo.gamma);
         scaler.stats = control.reward_scaler.stats.clone();
@@ -541,12 +575,12 @@ impl JointTrainer {
         let steps: usize = runs.iter().map(|r| r.steps).sum();
         self.env_steps += steps;
         let rl: Vec<f64> = runs.iter().map(|r| execution_reward(r, &self.task)).collect();
-        let (mut plan_loss, mut plan_drift) = (None, None);
+        let (mut plan_loss, mut plan_drift, mut plan_step) = (None, None, None);
         if !self.config.freeze_planner {
             let w = self.config.control_weight;
             let adv: Vec<f64> = leave_one_out(&rl, per_start).iter().map(|a| w * a).collect();
             let stats = self.plan.update_joint(&batch, &adv)?;
-            (plan_loss, plan_drift) = (Some(stats.loss), stats.drift);
+            (plan_loss, plan_drift, plan_step) = (Some(stats.loss), stats.drift, stats.step);
         }
         let mut control = None;
         let ppo = &self.control.config.ppo;
@@ -576,6 +610,8 @@ impl JointTrainer {
             lambda: self.plan.lagrangian().lambda,
             plan_loss,
             plan_drift,
+            plan_step: plan_step.map(|s| s.0),
+            plan_step_scale: plan_step.map(|s| s.1),
             low_level_reward: rl.iter().sum::<f64>() / n,
             score: Some(
                 runs.iter().map(|r| spec.score(&r.executed, &r.trajectory, &r.reached_at)).sum::<f64>() / n,
