@@ -745,9 +745,11 @@ impl PlanTrainer {
         } else {
             self.sample(n)?
         };
+        let flat: Vec<f64> = fresh.paths.to_dtype(DType::F64)?.flatten_all()?.to_vec1()?;
+        let fresh_rl = self.control.reward(&flat, self.task.steps, self.task.map.dim());
         let paths = Tensor::cat(&[&executed.paths.to_dtype(DType::F32)?, &fresh.paths], 0)?;
         let log_prob = Tensor::cat(&[&executed.log_prob, &fresh.log_prob], 0)?;
-        self.step(&PlanBatch { paths, log_prob }, Terms::Joint { advantages })
+        self.step(&PlanBatch { paths, log_prob }, Terms::Joint { advantages, fresh_rl: &fresh_rl })
     }
 
     /// One primal-dual step on `batch` with the terms `terms` says.
@@ -989,11 +991,16 @@ enum Terms<'a> {
     },
     /// The first `advantages.len()` paths were executed: the score function with these
     /// advantages as they are (their scale is the reward's, not the std of a few
-    /// runs). The rest are fresh samples: the score function on ρ as in
-    /// [`Terms::Batch`] with `r_l = 0`, and the spec's terms.
+    /// runs). The rest are fresh samples with pre-training's terms ([`Terms::Batch`]
+    /// with the [`ControlReward`] stand-in): the score function on `ρ + r_l` and the
+    /// spec's terms. On `ρ` alone (until 2026-12-02) the normalised score function
+    /// pressed every plan deeper into its goals with nothing in the balance, and the
+    /// plans grew longer than pre-training's.
     Joint {
         /// The executed paths' advantages.
         advantages: &'a [f64],
+        /// The stand-in `r_l` of each fresh path.
+        fresh_rl: &'a [f64],
     },
 }
 
@@ -1012,10 +1019,11 @@ impl Terms<'_> {
                 let rh: Vec<f64> = rho.iter().zip(*rl).map(|(a, b)| a + b).collect();
                 (normalised(&rh), 0..rho.len())
             }
-            Terms::Joint { advantages } => {
+            Terms::Joint { advantages, fresh_rl } => {
                 let e = advantages.len();
                 let mut w: Vec<f64> = advantages.iter().map(|a| pg_weight * a / e as f64).collect();
-                w.extend(normalised(&rho[e..]));
+                let rh: Vec<f64> = rho[e..].iter().zip(*fresh_rl).map(|(a, b)| a + b).collect();
+                w.extend(normalised(&rh));
                 (w, e..rho.len())
             }
         }
