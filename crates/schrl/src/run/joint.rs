@@ -51,16 +51,14 @@ pub struct JointConfig {
     /// 10 disrupted the first iterations: plan satisfaction fell to 0.13 before it
     /// recovered).
     pub control_weight: f64,
-    /// Weight per metre of the path-length term the planner keeps following pathwise
-    /// in the joint phase, as in pre-training (0.05, pre-training's; Point Seq seed 0:
-    /// without it the joint phase lengthened the deployed plans, 479 steps to reach
-    /// with it, 503 without, at control weight 0.3). Continued training still drifts
-    /// the plans from the short one pre-training kept (Point Branch seed 0 to its
-    /// budget: 9.76 m pre-trained, 10.16 m after, 417.6 steps to reach against the
-    /// frozen planner's 391.6). 0.2 held them (9.58 m, 391.6 steps) but pressed the
-    /// mean plans onto the constraint's edge: Branch seeds 1 and 2 fell to 0.946 and
-    /// 0.766 (waypoints 0.01–0.04 m outside the shrunk goal). Runs saved before it
-    /// existed used 0.
+    /// Weight per metre of the path-length stand-in the joint phase keeps on its
+    /// fresh samples, pathwise and in their score function, as in pre-training (0.05,
+    /// pre-training's; Point Seq seed 0: without it the joint phase lengthened the
+    /// deployed plans, 479 steps to reach with it, 503 without). While the fresh
+    /// samples' score function read ρ alone (until 2026-12-02) the plans still grew
+    /// (Point Branch seed 0: 9.76 m pre-trained, 10.16 m after, 417.6 steps to reach
+    /// against the frozen planner's 391.6; with it in both terms, 385.8). Runs saved
+    /// before it existed used 0.
     #[serde(default)]
     pub length_weight: f64,
     /// Weight per square metre of the trust region that holds the joint phase's
