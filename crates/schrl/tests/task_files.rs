@@ -336,3 +336,28 @@ fn a_fixed_start_is_drawn_without_panicking() {
     let starts: Vec<Vec<f32>> = t.sample_starts(&mut rng, 50).unwrap().to_vec2().unwrap();
     assert!(starts.iter().all(|s| s[0] == 1.5 && (-2.0..-1.0).contains(&s[1])), "{starts:?}");
 }
+
+/// The rungs of pre-training's horizon curriculum: Loop's windows all read to its
+/// last waypoint, so it has a shorter form; Seq's goals are due at fixed waypoints
+/// and Signal's counter holds from waypoint 10, so they have none.
+#[test]
+fn loop_has_shorter_horizons_and_seq_and_signal_have_none() {
+    let full = Task::point(TaskKind::Loop);
+    let four = full.with_horizon(4).expect("Loop has a 4-waypoint form");
+    assert_eq!(four.steps, 4);
+    assert_eq!(four.formula().horizon(), Some(4));
+    assert!(four.spec.contains("G[1,4]") && four.spec.contains("G[1,3]"), "{}", four.spec);
+    assert_eq!(four.steps_to_reach_at, Some(4));
+    // The short task is a task: its spec judges 4-waypoint paths.
+    let corners = [[2.0, -2.0], [2.0, 2.0], [-2.0, 2.0], [-2.0, -2.0], [2.0, -2.0]];
+    let path: Vec<f64> = corners.iter().flatten().copied().collect();
+    assert!(four.spec().robustness(&path, &stl::Semantics::hard()).unwrap() > 0.0);
+    let stay: Vec<f64> = [corners[0]; 5].iter().flatten().copied().collect();
+    assert!(
+        four.spec().robustness(&stay, &stl::Semantics::hard()).unwrap() < 0.0,
+        "the same corner twice fails"
+    );
+    assert_eq!(full.with_horizon(17).map(|t| t.formula()), Some(full.formula()));
+    assert!(Task::point(TaskKind::Seq).with_horizon(4).is_none());
+    assert!(Task::point(TaskKind::Signal).with_horizon(6).is_none());
+}

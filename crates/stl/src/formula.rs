@@ -271,6 +271,53 @@ impl Formula {
     }
 }
 
+impl Formula {
+    /// The formula for a path of `to` waypoints instead of `steps`, where that is
+    /// plain: every temporal window reads up to the path's last waypoint (its end
+    /// plus what its operand looks ahead is `steps`) and holds no window inside it
+    /// (`○` may appear); each such window then ends `steps − to` steps earlier, so
+    /// the result asks of the first `to` waypoints what the formula asks of all of
+    /// them (`□[1,17](l0 ∨ l1)` → `□[1,4](l0 ∨ l1)`). `None` when some window does
+    /// not reach the end (`◇[1,2] g0` on 8 waypoints: a fixed-time obligation), is
+    /// nested or unbounded, would become empty, or `to > steps`. What pre-training's
+    /// horizon curriculum trains on.
+    pub fn end_anchored_prefix(&self, steps: usize, to: usize) -> Option<Formula> {
+        if to > steps {
+            return None;
+        }
+        let cut = steps - to;
+        let flat = |f: &Formula| f.windows() == 0;
+        // This window, shortened: it must read up to the last waypoint exactly.
+        let shorten = |i: &Interval| -> Option<Interval> {
+            let b = i.end?;
+            (self.horizon()? == steps && b >= i.start + cut).then(|| Interval::bounded(i.start, b - cut))
+        };
+        let each =
+            |v: &[Formula]| v.iter().map(|f| f.end_anchored_prefix(steps, to)).collect::<Option<Vec<_>>>();
+        let rec = |f: &Formula| f.end_anchored_prefix(steps, to).map(Box::new);
+        Some(match self {
+            f if flat(f) => f.clone(),
+            Formula::Not(f) => Formula::Not(rec(f)?),
+            Formula::And(v) => Formula::And(each(v)?),
+            Formula::Or(v) => Formula::Or(each(v)?),
+            Formula::Implies(l, r) => Formula::Implies(rec(l)?, rec(r)?),
+            Formula::Eventually(i, f) if flat(f) => Formula::Eventually(shorten(i)?, f.clone()),
+            Formula::Globally(i, f) if flat(f) => Formula::Globally(shorten(i)?, f.clone()),
+            Formula::Until(i, l, r) if flat(l) && flat(r) => {
+                Formula::Until(shorten(i)?, l.clone(), r.clone())
+            }
+            // A window under `○` or inside another window: its reach is not the path's end.
+            _ => return None,
+        })
+    }
+
+    /// Temporal windows (`◇`, `□`, `U`) in the formula.
+    fn windows(&self) -> usize {
+        let own = matches!(self, Formula::Eventually(..) | Formula::Globally(..) | Formula::Until(..));
+        usize::from(own) + self.children().map(Formula::windows).sum::<usize>()
+    }
+}
+
 fn flatten_into(f: Formula, conj: bool, out: &mut Vec<Formula>) {
     match (f, conj) {
         (Formula::And(v), true) | (Formula::Or(v), false) => out.extend(v),

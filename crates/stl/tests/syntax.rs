@@ -119,3 +119,25 @@ fn until_horizon_counts_the_left_operand_one_step_short() {
     assert_eq!(parse("(X a) U[2,2] b").unwrap().horizon(), Some(2));
     assert_eq!(parse("a U[1,3] b").unwrap().horizon(), Some(3));
 }
+
+/// Pre-training's horizon curriculum: windows that read to the last waypoint end
+/// earlier on a shorter path; fixed-time windows, nested ones and empty results have
+/// no shorter form.
+#[test]
+fn end_anchored_prefix_shortens_windows_that_reach_the_end() {
+    let loop_spec = "(G[1,17] (l0 | l1) & G[1,16] ((l0 -> !X l0) & (l1 -> !X l1))) & G[1,17] safe";
+    let cut = parse(loop_spec).unwrap().end_anchored_prefix(17, 4).unwrap();
+    assert_eq!(
+        cut,
+        parse("(G[1,4] (l0 | l1) & G[1,3] ((l0 -> !X l0) & (l1 -> !X l1))) & G[1,4] safe").unwrap()
+    );
+    assert_eq!(cut.horizon(), Some(4));
+    assert_eq!(parse(loop_spec).unwrap().end_anchored_prefix(17, 17), Some(parse(loop_spec).unwrap()));
+    assert_eq!(parse("a U[1,12] b").unwrap().end_anchored_prefix(12, 5), Some(parse("a U[1,5] b").unwrap()));
+    // Seq's first goal is due at waypoints 1–2 whatever the path's length.
+    assert_eq!(parse("F[1,2] g0 & F[7,8] g3 & G[1,8] safe").unwrap().end_anchored_prefix(8, 4), None);
+    assert_eq!(parse("G[1,8] F[0,2] a").unwrap().end_anchored_prefix(10, 4), None);
+    assert_eq!(parse("G[6,8] a").unwrap().end_anchored_prefix(8, 4), None, "empty window");
+    assert_eq!(parse("G[1,inf] a").unwrap().end_anchored_prefix(8, 4), None);
+    assert_eq!(parse("G[1,4] a").unwrap().end_anchored_prefix(4, 5), None);
+}

@@ -77,6 +77,11 @@ pub struct TrainArgs {
     /// [default: 0.05].
     #[arg(long)]
     pretrain_length_weight: Option<f64>,
+    /// Waypoints of the first rung of pre-training's horizon curriculum, climbed by
+    /// attempts that keep failing where the task's spec has shorter forms; 0: none
+    /// [default: 4].
+    #[arg(long)]
+    pretrain_horizon_from: Option<usize>,
     /// Keep the pre-trained planner fixed in the joint phase (ablation; by default it
     /// learns from the executed runs, Algorithm 1).
     #[arg(long)]
@@ -192,6 +197,7 @@ impl TrainArgs {
         set(&mut p.updates, self.pretrain_updates);
         set(&mut p.candidates, self.pretrain_candidates);
         set(&mut p.length_weight, self.pretrain_length_weight);
+        set(&mut p.horizon_from, self.pretrain_horizon_from);
         set(&mut s.eval_groups, self.eval_groups);
         set(&mut s.save_every, self.save_every);
         s.validate().map_err(flag_error)?;
@@ -261,6 +267,10 @@ impl TrainArgs {
                 (
                     "--pretrain-length-weight",
                     differs(&self.pretrain_length_weight, &saved.pretrain.length_weight),
+                ),
+                (
+                    "--pretrain-horizon-from",
+                    differs(&self.pretrain_horizon_from, &saved.pretrain.horizon_from),
                 ),
                 ("--freeze-planner", self.freeze_planner && !saved.joint.freeze_planner),
                 ("--runs-per-start", differs(&self.runs_per_start, &saved.joint.runs_per_start)),

@@ -96,12 +96,19 @@ impl ControlReward for NoControlReward {
     }
 }
 
+/// The Euclidean distance between two points.
+fn distance(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
+}
+
+/// `Σ_i ‖a_i − b_i‖` over the waypoints of two paths (`[waypoints][dim]`, row-major).
+fn summed_distance(a: &[f64], b: &[f64], dim: usize) -> f64 {
+    a.chunks(dim).zip(b.chunks(dim)).map(|(x, y)| distance(x, y)).sum()
+}
+
 /// The length of one path (`[waypoints][dim]`, row-major): the sum of its segments.
 fn path_length(path: &[f64], dim: usize) -> f64 {
-    path.chunks(dim)
-        .zip(path.chunks(dim).skip(1))
-        .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt())
-        .sum()
+    summed_distance(path, &path[dim.min(path.len())..], dim)
 }
 
 /// `r_l = −weight · length(τ)`: shorter paths are easier to follow.
@@ -330,12 +337,12 @@ impl AnchorKind {
         dim: usize,
         ascent: &mut [f64],
     ) -> (f64, f64) {
-        let far: Vec<f64> = path.iter().zip(anchored).map(|(x, y)| x - y).collect();
-        let dist = far.chunks(dim).map(|d| d.iter().map(|v| v * v).sum::<f64>().sqrt()).sum();
+        let dist = summed_distance(path, anchored, dim);
         let penalty = match self {
             AnchorKind::Paths => {
-                ascent.iter_mut().zip(&far).for_each(|(t, d)| *t -= weight * d);
-                0.5 * weight * far.iter().map(|d| d * d).sum::<f64>()
+                let far = path.iter().zip(anchored).map(|(x, y)| x - y);
+                ascent.iter_mut().zip(far.clone()).for_each(|(t, d)| *t -= weight * d);
+                0.5 * weight * far.map(|d| d * d).sum::<f64>()
             }
             AnchorKind::Length => {
                 let excess = (path_length(path, dim) - path_length(anchored, dim)).max(0.0);
@@ -411,13 +418,8 @@ impl FastUpdate {
         let (starts, noise) = (&self.fresh.0, &self.fresh.1);
         let n = starts.len() / dim;
         self.net.forward(Source::Sample { starts, noise }, n, steps, &mut self.probe);
-        let total: f64 = self
-            .probe
-            .paths
-            .chunks(dim)
-            .zip(fresh.chunks(dim))
-            .map(|(a, b)| a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>().sqrt())
-            .sum();
+        let wide = |v: &[f32]| v.iter().map(|x| *x as f64).collect::<Vec<f64>>();
+        let total = summed_distance(&wide(&self.probe.paths), &wide(fresh), dim);
         // Starts coincide: the mean is over the planned waypoints.
         total / (n * steps) as f64
     }
@@ -604,6 +606,43 @@ impl PlanTrainer {
     /// Re-initialisations made by the restart rule ([`CpgConfig::restart_after`]).
     pub fn restarts(&self) -> usize {
         self.restarts
+    }
+
+    /// Whether the current attempt has been promising ([`PROMISING`]); once it has,
+    /// the restart rule leaves it alone.
+    pub fn promising(&self) -> bool {
+        self.promising
+    }
+
+    /// Trains on `task` from the next update on, keeping the parameters, Adam's
+    /// moments, λ, the random stream and the attempt's state. `task` must plan in as
+    /// many dimensions from the same start region as the current one (the same task
+    /// with other margins, or on fewer waypoints: the network is the same for any
+    /// number); otherwise an error naming what differs.
+    pub fn set_task(&mut self, task: Task) -> Result<()> {
+        let now = &self.task;
+        if task.map.dim() != now.map.dim() || task.start != now.start {
+            candle_core::bail!(
+                "set_task: the new task plans in {} dimensions from {:?}, the planner was built \
+                 for {} from {:?}",
+                task.map.dim(),
+                task.start,
+                now.map.dim(),
+                now.start
+            );
+        }
+        self.spec = task.tensor_spec();
+        self.hard = task.spec();
+        self.task = task;
+        Ok(())
+    }
+
+    /// Starts the current attempt's clock again without re-initialising it: not yet
+    /// promising, no updates, so the restart rule judges it afresh (on a harder task
+    /// set by [`PlanTrainer::set_task`]).
+    pub fn restart_clock(&mut self) {
+        self.promising = false;
+        self.attempt_updates = 0;
     }
 
     /// Re-initialises the planner from the next seed of the restart sequence, with

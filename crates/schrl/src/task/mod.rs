@@ -534,6 +534,24 @@ impl Task {
         t
     }
 
+    /// The task on its first `steps` waypoints, where its spec has that form
+    /// ([`Formula::end_anchored_prefix`]: every window reads to the last waypoint)
+    /// and no waypoint-indexed signal (Signal's counter holds from a fixed waypoint);
+    /// `None` otherwise. The rungs of pre-training's horizon curriculum.
+    pub fn with_horizon(&self, steps: usize) -> Option<Task> {
+        if self.counter_from.is_some() || steps == 0 {
+            return None;
+        }
+        let formula = self.formula.end_anchored_prefix(self.steps, steps)?;
+        Some(Task {
+            spec: formula.to_string(),
+            formula,
+            steps,
+            steps_to_reach_at: self.steps_to_reach_at.map(|k| k.min(steps)),
+            ..self.clone()
+        })
+    }
+
     /// The radius within which a robot executing this task counts a waypoint as
     /// reached: its own `robot_reach`, but at most two thirds of the smallest goal
     /// radius (the smallest disc the planner plans into after
