@@ -281,7 +281,7 @@ fn pretraining_keeps_trying_while_no_candidate_has_found_the_task() {
     let cfg = JointConfig { safe_margin: 0.1, ..JointConfig::default() };
     let mut t = JointTrainer::new(Task::point(TaskKind::Loop), cfg, CpgConfig::default(), control).unwrap();
     // Two updates per candidate find nothing.
-    let pre = PretrainConfig { updates: 2, candidates: 1, length_weight: 0.05 };
+    let pre = PretrainConfig { updates: 2, candidates: 1, ..PretrainConfig::default() };
     let kept = pretrain(&mut t, &pre, &mut |_| {}).unwrap().unwrap();
     assert!(kept.satisfaction < FOUND);
     let with_margin = kept.candidates.iter().filter(|c| c.with_safe_margin).count();
@@ -304,7 +304,7 @@ fn pretrained(kind: TaskKind, cfg: JointConfig) -> JointTrainer {
     let mut t =
         JointTrainer::new(Task::point(kind), cfg, CpgConfig { seed: 1, ..CpgConfig::default() }, control)
             .unwrap();
-    let pre = PretrainConfig { updates: 1000, candidates: 1, length_weight: 0.05 };
+    let pre = PretrainConfig { updates: 1000, candidates: 1, ..PretrainConfig::default() };
     pretrain(&mut t, &pre, &mut |_| {}).unwrap().expect("a kept planner");
     t
 }
