@@ -274,8 +274,13 @@ fn train_candidate(
         update(i, s.satisfaction);
         if plan.restarts() != restarts {
             restarts = plan.restarts();
-            rung = (restarts >= CURRICULUM_AFTER && !rungs.is_empty()).then_some(0);
-            plan.set_task(rung.map_or(task, |r| &rungs[r]).clone())?;
+            // A fresh attempt starts at the bottom rung (or, before the curriculum,
+            // on the task it already trains on: no spec to rebuild).
+            let bottom = (restarts >= CURRICULUM_AFTER && !rungs.is_empty()).then_some(0);
+            if bottom.is_some() && rung != bottom {
+                plan.set_task(rungs[0].clone())?;
+            }
+            rung = bottom;
         } else if let Some(r) = rung.filter(|_| plan.promising()) {
             rung = Some(r + 1).filter(|&next| next < rungs.len());
             plan.set_task(rung.map_or(task, |r| &rungs[r]).clone())?;
