@@ -281,6 +281,35 @@ fn a_waypoint_counts_as_reached_within_two_thirds_of_the_smallest_goal() {
 /// through the duck, so among centre-to-centre plans only the bounce between
 /// (2, 1, 1) and (1, 1, 2) satisfies the spec as planned. (Without the margins,
 /// off-centre plans through (−1, −1, 1) exist: the gradient planner finds them.)
+/// Regression: with the reference's 4000 steps every Drone Loop run timed out (seeds 0
+/// and 1, 500 of 500 runs, after the planner had found the bounce): 20 hops of 1.4 m
+/// each, reached within 0.33 m, take the Drone's position loop over 4000 steps. Flown
+/// with the base gains (the zero action) from the start region's corner farthest from the
+/// goals, the bounce needs more than 4000 steps and fits the task's limit.
+#[test]
+fn drone_loop_timed_out_with_the_references_4000_steps() {
+    use schrl::run::execute::{Dispatch, Outcome, start_run, task_env};
+    let t = Task::builtin("drone", TaskKind::Loop).unwrap();
+    let mut env = task_env(sim::Robot::Drone, &t).unwrap();
+    let bounce = [vec![1.0, 1.0, 2.0], vec![2.0, 1.0, 1.0]];
+    let start = vec![t.start.1[0], t.start.0[1], t.start.0[2]];
+    let path: Vec<Vec<f64>> =
+        std::iter::once(start).chain((0..t.steps).map(|k| bounce[k % 2].clone())).collect();
+    let mut obs = vec![0.0; env.observation_space().dim()];
+    let mut run = start_run(env.as_mut(), 0, &path, t.step_limit, &mut obs).unwrap();
+    let zero = vec![0.0; env.action_space().dim()];
+    let outcome = loop {
+        let step = env.step_into(&zero, &mut obs).unwrap();
+        match run.after_step(&step, env.position()) {
+            Dispatch::Done(o) => break o,
+            Dispatch::NewGoal(g) => env.set_goal(&g).unwrap(),
+            Dispatch::Continue => {}
+        }
+    };
+    assert_eq!(outcome, Outcome::Completed, "after {} steps, {} waypoints", run.steps(), run.reached_count());
+    assert!(run.steps() > 4000 && run.steps() < t.step_limit, "{} steps", run.steps());
+}
+
 #[test]
 fn drone_loop_can_only_bounce_between_two_goals_and_can_from_every_start() {
     let t = Task::builtin("drone", TaskKind::Loop).unwrap();
