@@ -275,17 +275,11 @@ fn a_waypoint_counts_as_reached_within_two_thirds_of_the_smallest_goal() {
     assert!(env.step(&[0.0; 18]).unwrap().1.reached);
 }
 
-/// Why Drone Loop is hard for the planner (README, *Car and Drone*): every waypoint
-/// must be in a goal, and with the planning margins (goal discs shrunk, 0.1 m more
-/// clearance) the straight segments between the goals' centres from (−1, −1, 1) pass
-/// through the duck, so among centre-to-centre plans only the bounce between
-/// (2, 1, 1) and (1, 1, 2) satisfies the spec as planned. (Without the margins,
-/// off-centre plans through (−1, −1, 1) exist: the gradient planner finds them.)
 /// Regression: with the reference's 4000 steps every Drone Loop run timed out (seeds 0
 /// and 1, 500 of 500 runs, after the planner had found the bounce): 20 hops of 1.4 m
 /// each, reached within 0.33 m, take the Drone's position loop over 4000 steps. Flown
-/// with the base gains (the zero action) from the start region's corner farthest from the
-/// goals, the bounce needs more than 4000 steps and fits the task's limit.
+/// with the base gains (the zero action) from the start region's corner (2, −2, 0.5),
+/// the bounce needs more than 4000 steps and fits the task's limit.
 #[test]
 fn drone_loop_timed_out_with_the_references_4000_steps() {
     use schrl::run::execute::{Dispatch, Outcome, start_run, task_env};
@@ -310,6 +304,12 @@ fn drone_loop_timed_out_with_the_references_4000_steps() {
     assert!(run.steps() > 4000 && run.steps() < t.step_limit, "{} steps", run.steps());
 }
 
+/// Why Drone Loop is hard for the planner (README, *Car and Drone*): every waypoint
+/// must be in a goal, and with the planning margins (goal discs shrunk, 0.1 m more
+/// clearance) the straight segments between the goals' centres from (−1, −1, 1) pass
+/// through the duck, so among centre-to-centre plans only the bounce between
+/// (2, 1, 1) and (1, 1, 2) satisfies the spec as planned. (Without the margins,
+/// off-centre plans through (−1, −1, 1) exist: the gradient planner finds them.)
 #[test]
 fn drone_loop_can_only_bounce_between_two_goals_and_can_from_every_start() {
     let t = Task::builtin("drone", TaskKind::Loop).unwrap();
