@@ -1,26 +1,30 @@
 //! Doggo: the paper's quadruped (observation 58, action 12), on MuJoCo.
 //!
-//! The model is `assets/doggo.xml` ([`DOGGO_XML`]), written for this project from
-//! the reference setup's facts; the walls of the map are added to it as MuJoCo boxes
-//! (17 squares of 0.5 m, 0.5 m tall) when it is compiled, so legs and torso meet them
-//! in MuJoCo's contact solver.
+//! The model is `assets/doggo.xml` ([`DOGGO_XML`]): Safety-Gym's Doggo, written for
+//! this project from the facts of its public MJCF; the walls of the map are added to
+//! it as MuJoCo boxes (17 squares of 0.5 m, 0.5 m tall) when it is compiled, so legs
+//! and torso meet them in MuJoCo's contact solver.
 //!
 //! | parameter | value | source |
 //! |---|---|---|
-//! | physics step | 0.005 s, 10 per control step | reference setup |
-//! | joints | per leg: hip yaw −10°..30°, hip pitch −75°..0°, knee −75°..0° | reference setup |
-//! | motors | 12 torque motors, ctrl ±1, gear 0.0125 | reference setup |
-//! | touch sensors | 8: each leg's foot and shin | reference setup (8), placement ours |
-//! | mass | 0.05 kg torso, 5 g per limb segment, 2 g per foot (0.098 kg) | this project |
+//! | body | front and rear torso cylinders (r 0.075, 0.2 m, density 0.5) on a passive waist hinge about x, ±30° | Safety-Gym's `doggo.xml` |
+//! | legs | capsules r 0.032, density 5; thigh (0.098, ±0.0566, −0.05), lower leg (−0.1176, ∓0.0679, −0.1) | Safety-Gym's `doggo.xml` |
+//! | joints | per leg hip z −10°..30°, hip y −75°..15° (front) / 0°..135° (rear), ankle −75°..0° | Safety-Gym's `doggo.xml` |
+//! | springs | stiffness 0.01 on every joint towards its reference: front hip y −10°, ankles −20°, others 0 | Safety-Gym's `doggo.xml` |
+//! | motors | 12 torque motors, ctrl ±1, gear 0.0125 | Safety-Gym's `doggo.xml` |
+//! | contact | condim 6, MuJoCo's default friction, legs collide with each other | Safety-Gym's `doggo.xml` |
+//! | physics step | 0.01 s, 10 per control step | Safety-Gym's `doggo.xml` and frame skip |
+//! | touch sensors | 8: each lower leg's ankle and foot | Safety-Gym's `doggo.xml` |
 //! | reach radius | 0.3 m | reference setup |
 //!
-//! Observation (58): accelerometer, velocimeter, gyro, magnetometer (3 each, torso
-//! frame), the 8 touch sensors, the 12 joint velocities, the sines and then the
-//! cosines of the 12 joint angles, and the goal vector in the robot's yaw frame (2).
-//! Actions are the 12 motor controls in the order front-left, front-right, back-left,
-//! back-right, each leg hip yaw, hip pitch, knee.
+//! Observation (58): accelerometer, velocimeter, gyro, magnetometer (3 each, front
+//! torso frame), the 8 touch sensors, the velocities of the 12 motor joints, the sines
+//! and then the cosines of their angles, and the goal vector in the robot's yaw frame
+//! (2); the passive waist is not observed, as in Safety-Gym. Actions are the 12 motor
+//! controls in the order front-left, front-right, back-left, back-right, each leg
+//! hip z, hip y, ankle.
 //!
-//! A fall — the torso's centre below [`FALL_HEIGHT`], or the torso tilted past 60°
+//! A fall — the torso's centre below [`FALL_HEIGHT`], or the front torso tilted past 60°
 //! ([`FALL_TILT_COS`]: on its side or upside down) — is reported by [`crate::Step::fell`] and ends the episode like a collision.
 
 use std::sync::{Arc, OnceLock};
@@ -37,8 +41,8 @@ use crate::robots::{Heading, random_yaw};
 /// The MJCF model; the line `__WALLS__` is replaced by the map's wall boxes.
 pub const DOGGO_XML: &str = include_str!("../../assets/doggo.xml");
 
-/// A torso centre lower than this (m) counts as a fall: standing it is at 0.164 m,
-/// lying on its belly at 0.05 m.
+/// A torso centre lower than this (m) counts as a fall: standing it is at
+/// [`STANDING_HEIGHT`], lying on its belly at the torso's radius, 0.075 m.
 pub const FALL_HEIGHT: f64 = 0.08;
 
 /// A torso tilted further than 60° from upright (on its side, or upside down) has
@@ -47,14 +51,20 @@ pub const FALL_TILT_COS: f64 = 0.5;
 
 const NAME: &str = "doggo";
 const SUBSTEPS: usize = 10;
-/// Height of the torso's centre at a reset: 1 cm above the standing height, so the
-/// feet start clear of the floor and settle onto it.
-const START_HEIGHT: f64 = 0.175;
+/// Height (m) of the torso's centre standing still with the motors off, on its springs
+/// and joint limits (test `stands_at_its_standing_height_with_the_motors_off`).
+pub const STANDING_HEIGHT: f64 = 0.161;
+/// Height of the torso's centre at a reset, joints at zero: Safety-Gym's 0.22 m; the
+/// robot drops onto its feet and settles within a few control steps.
+const START_HEIGHT: f64 = 0.22;
 /// Half the height of a wall box (m).
 const WALL_HALF_HEIGHT: f64 = 0.25;
 /// Sensor values the model declares: 4 inertial sensors of 3, then 8 touch sensors.
 const SENSORS: usize = 20;
+/// Motor joints (observed and driven).
 const JOINTS: usize = 12;
+/// Passive joints: the waist.
+const PASSIVE: usize = 1;
 /// Free joint: 7 position numbers (x, y, z, quaternion w x y z), 6 velocity numbers.
 const FREE_NQ: usize = 7;
 const FREE_NV: usize = 6;
@@ -64,6 +74,9 @@ struct Compiled {
     model: Arc<MjModel>,
     /// Geom ids of the walls: contact with one is a collision.
     walls: std::ops::Range<usize>,
+    /// Where each motor's joint (in action order) sits in `qpos` and in `qvel`.
+    motor_qpos: [usize; JOINTS],
+    motor_qvel: [usize; JOINTS],
 }
 
 /// The MJCF for `map`: [`DOGGO_XML`] with one box per wall square.
@@ -98,7 +111,7 @@ fn compile_for(map: &Map) -> Result<Arc<Compiled>, EnvError> {
         }
     };
     let m = model.ffi();
-    expect("position coordinates", m.nq as usize, FREE_NQ + JOINTS)?;
+    expect("position coordinates", m.nq as usize, FREE_NQ + JOINTS + PASSIVE)?;
     expect("actuators", m.nu as usize, JOINTS)?;
     expect("sensor values", m.nsensordata as usize, SENSORS)?;
     let walls = if matches!(map, Map::Walls(_)) {
@@ -107,7 +120,12 @@ fn compile_for(map: &Map) -> Result<Arc<Compiled>, EnvError> {
     } else {
         0..0
     };
-    Ok(Arc::new(Compiled { model: Arc::new(model), walls }))
+    let (mut motor_qpos, mut motor_qvel) = ([0; JOINTS], [0; JOINTS]);
+    for (a, [joint, _]) in model.actuator_trnid().iter().enumerate() {
+        motor_qpos[a] = model.jnt_qposadr()[*joint as usize] as usize;
+        motor_qvel[a] = model.jnt_dofadr()[*joint as usize] as usize;
+    }
+    Ok(Arc::new(Compiled { model: Arc::new(model), walls, motor_qpos, motor_qvel }))
 }
 
 /// The compiled model for `map`, compiled once per process and shared by every Doggo
@@ -164,11 +182,21 @@ impl Doggo {
     }
 
     /// The 8 touch sensors (N): feet front-left, front-right, back-left, back-right,
-    /// then the shins in the same order.
+    /// then the ankles in the same order.
     pub fn touch(&self) -> [f64; 8] {
         let mut t = [0.0; 8];
         t.copy_from_slice(&self.data.sensordata()[12..SENSORS]);
         t
+    }
+
+    /// The angles (rad) of the 12 motor joints, in action order.
+    pub fn motor_angles(&self) -> [f64; JOINTS] {
+        self.compiled.motor_qpos.map(|i| self.data.qpos()[i])
+    }
+
+    /// The compiled model (masses, joint ranges, springs, gears), read only.
+    pub fn model(&self) -> &MjModel {
+        &self.compiled.model
     }
 
     /// `true` once the robot has fallen (torso too low, on its side or upside down).
@@ -214,10 +242,10 @@ impl Doggo {
         let len = |what: &str, got: usize, want: usize| {
             if got == want { Ok(()) } else { Err(format!("{what} has {got} numbers, expected {want}")) }
         };
-        len("qpos", s.qpos.len(), FREE_NQ + JOINTS)?;
-        len("qvel", s.qvel.len(), FREE_NV + JOINTS)?;
+        len("qpos", s.qpos.len(), FREE_NQ + JOINTS + PASSIVE)?;
+        len("qvel", s.qvel.len(), FREE_NV + JOINTS + PASSIVE)?;
         len("ctrl", s.ctrl.len(), JOINTS)?;
-        len("qacc_warmstart", s.qacc_warmstart.len(), FREE_NV + JOINTS)?;
+        len("qacc_warmstart", s.qacc_warmstart.len(), FREE_NV + JOINTS + PASSIVE)?;
         len("sensordata", s.sensordata.len(), SENSORS)?;
         self.data.set_time(s.time);
         self.data.qpos_mut().copy_from_slice(&s.qpos);
@@ -271,8 +299,9 @@ impl Dynamics for Doggo {
     const ACT_DIM: usize = JOINTS;
     const PLAN_DIM: usize = 2;
     const REACH_RADIUS: f64 = 0.3;
-    /// Feet stand about 0.25 m from the torso's centre.
-    const RADIUS: f64 = 0.25;
+    /// Standing, the front knees' capsules reach 0.357 m from the centre (the farthest
+    /// part; the feet 0.25–0.34 m).
+    const RADIUS: f64 = 0.36;
 
     fn reset(&mut self, start: &[f64], rng: &mut ChaCha8Rng) {
         let yaw = random_yaw(rng);
@@ -311,9 +340,10 @@ impl Dynamics for Doggo {
     fn observe(&self, goal: &[f64], obs: &mut [f64]) {
         let (qpos, qvel) = (self.data.qpos(), self.data.qvel());
         obs[..SENSORS].copy_from_slice(&self.data.sensordata()[..SENSORS]);
-        obs[SENSORS..SENSORS + JOINTS].copy_from_slice(&qvel[FREE_NV..]);
-        for (j, q) in qpos[FREE_NQ..].iter().enumerate() {
-            let (s, c) = q.sin_cos();
+        let c = &self.compiled;
+        for (j, (&iq, &iv)) in c.motor_qpos.iter().zip(&c.motor_qvel).enumerate() {
+            obs[SENSORS + j] = qvel[iv];
+            let (s, c) = qpos[iq].sin_cos();
             obs[SENSORS + JOINTS + j] = s;
             obs[SENSORS + 2 * JOINTS + j] = c;
         }
