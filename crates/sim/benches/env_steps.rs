@@ -1,7 +1,8 @@
-//! Environment steps per second on one core, single and vectorised (N = 64).
+//! Environment steps per second: single and vectorised (N = 64) on one core, and with
+//! `--features mujoco` the Doggo single and as PPO's 8 environments on all of rayon's
+//! threads (`env_vec8`).
 //!
-//! Run: `cargo bench -p schrl-sim --bench env_steps` (figures in BENCHMARKS.md); with
-//! `--features mujoco` the single-environment group includes the Doggo.
+//! Run: `cargo bench -p schrl-sim --bench env_steps` (figures in BENCHMARKS.md).
 //! Actions change every 20 steps and goals are re-drawn as they are reached, so the
 //! robots cross the map and meet walls as they would in training.
 
@@ -83,9 +84,43 @@ fn vectorised(c: &mut Criterion) {
     g.finish();
 }
 
+/// PPO's 8 environments of each robot that steps them in parallel
+/// ([`Robot::steps_in_parallel`]), on as many threads as rayon has.
+fn parallel(c: &mut Criterion) {
+    let n = 8;
+    let mut g = c.benchmark_group("env_vec8");
+    g.throughput(Throughput::Elements((STEPS * n) as u64));
+    for robot in Robot::ALL.into_iter().filter(|r| r.is_available() && r.steps_in_parallel()) {
+        let mut v = VecEnv::new(robot, robot.default_map(), n, 3).unwrap();
+        let dim = v.act_dim();
+        let acts = actions(dim, n);
+        let mut obs = vec![0.0; n * v.obs_dim()];
+        let mut steps = vec![Step::default(); n];
+        g.bench_function(BenchmarkId::from_parameter(robot.name()), |b| {
+            b.iter(|| {
+                for t in 0..STEPS {
+                    let a = &acts[(t / 20) * dim * n..(t / 20 + 1) * dim * n];
+                    v.step_all(a, &mut obs, &mut steps).unwrap();
+                    // A fallen robot stays fallen until reset; in training the
+                    // trainer resets it.
+                    for (i, s) in steps.iter().enumerate() {
+                        if s.fell {
+                            let mut o = vec![0.0; v.obs_dim()];
+                            v.envs_mut()[i].reset_into(t as u64, None, &mut o).unwrap();
+                        }
+                    }
+                }
+                v.reset_all(5, &mut obs).unwrap();
+                black_box(&obs);
+            })
+        });
+    }
+    g.finish();
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3)).sample_size(20);
-    targets = single, vectorised
+    targets = single, vectorised, parallel
 }
 criterion_main!(benches);

@@ -1,5 +1,7 @@
 //! Many environments stepped together, each seeded from one seed.
 
+use rayon::prelude::*;
+
 use crate::env::{Env, EnvError, Step};
 use crate::map::Map;
 use crate::{Robot, make_env};
@@ -13,11 +15,15 @@ pub fn member_seed(seed: u64, i: usize) -> u64 {
     z ^ (z >> 31)
 }
 
-/// N environments of one robot, stepped in order on the calling thread.
+/// N environments of one robot, stepped together: in order on the calling thread, or,
+/// for a robot whose step is heavy ([`Robot::steps_in_parallel`]), each on one of
+/// rayon's threads. Either way every environment owns its state and random stream, so
+/// the results are the same, bit for bit, whatever the thread count.
 pub struct VecEnv {
     envs: Vec<Box<dyn Env>>,
     obs_dim: usize,
     act_dim: usize,
+    parallel: bool,
 }
 
 impl VecEnv {
@@ -26,7 +32,7 @@ impl VecEnv {
         let envs = (0..n).map(|_| make_env(robot, map.clone())).collect::<Result<Vec<_>, _>>()?;
         let obs_dim = envs.first().map_or(0, |e| e.observation_space().dim());
         let act_dim = envs.first().map_or(0, |e| e.action_space().dim());
-        let mut v = Self { envs, obs_dim, act_dim };
+        let mut v = Self { envs, obs_dim, act_dim, parallel: robot.steps_in_parallel() };
         let mut obs = vec![0.0; n * obs_dim];
         v.reset_all(seed, &mut obs)?;
         Ok(v)
@@ -66,10 +72,14 @@ impl VecEnv {
     /// observations into `obs` (`n × obs_dim`).
     pub fn reset_all(&mut self, seed: u64, obs: &mut [f64]) -> Result<(), EnvError> {
         self.check(obs.len(), self.obs_dim, "observation")?;
-        for (i, (env, o)) in self.envs.iter_mut().zip(obs.chunks_mut(self.obs_dim)).enumerate() {
-            env.reset_into(member_seed(seed, i), None, o)?;
+        let reset = |(i, (env, o)): (usize, (&mut Box<dyn Env>, &mut [f64]))| {
+            env.reset_into(member_seed(seed, i), None, o).map(|_| ())
+        };
+        if self.parallel {
+            self.envs.par_iter_mut().zip(obs.par_chunks_mut(self.obs_dim)).enumerate().try_for_each(reset)
+        } else {
+            self.envs.iter_mut().zip(obs.chunks_mut(self.obs_dim)).enumerate().try_for_each(reset)
         }
-        Ok(())
     }
 
     /// Steps every environment with its action (`actions`: `n × act_dim`), writing
@@ -80,16 +90,26 @@ impl VecEnv {
         if steps.len() != self.envs.len() {
             return Err(EnvError::ObservationLength { expected: self.envs.len(), got: steps.len() });
         }
-        for (((env, a), o), s) in self
-            .envs
-            .iter_mut()
-            .zip(actions.chunks(self.act_dim))
-            .zip(obs.chunks_mut(self.obs_dim))
-            .zip(steps)
-        {
+        let (ad, od) = (self.act_dim, self.obs_dim);
+        let step = |env: &mut Box<dyn Env>, a: &[f64], o: &mut [f64], s: &mut Step| {
             *s = env.step_into(a, o)?;
+            Ok(())
+        };
+        if self.parallel {
+            self.envs
+                .par_iter_mut()
+                .zip(actions.par_chunks(ad))
+                .zip(obs.par_chunks_mut(od))
+                .zip(steps.par_iter_mut())
+                .try_for_each(|(((env, a), o), s)| step(env, a, o, s))
+        } else {
+            self.envs
+                .iter_mut()
+                .zip(actions.chunks(ad))
+                .zip(obs.chunks_mut(od))
+                .zip(steps)
+                .try_for_each(|(((env, a), o), s)| step(env, a, o, s))
         }
-        Ok(())
     }
 
     fn check(&self, len: usize, per: usize, what: &'static str) -> Result<(), EnvError> {

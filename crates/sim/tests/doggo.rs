@@ -4,7 +4,8 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sim::mujoco::{CarTwin, Doggo, FALL_HEIGHT, PointTwin, STANDING_HEIGHT};
-use sim::{Car, Dynamics, Env, GoalEnv, Map, Point, Robot, make_env};
+use sim::vec_env::member_seed;
+use sim::{Car, Dynamics, Env, GoalEnv, Map, Point, Robot, Step, VecEnv, make_env};
 
 fn doggo_on(map: &str) -> GoalEnv<Doggo> {
     let map = Map::by_name(map).unwrap();
@@ -361,5 +362,33 @@ fn native_car_follows_its_mujoco_twin() {
     for seed in 0..5 {
         let [n, t] = car_vs_twin(seed, 20, |r| [r.random_range(-1.0..1.0), r.random_range(-1.0..1.0)]);
         assert!(close(n[2], t[2], 0.10), "seed {seed}: native path {} m, MuJoCo {}", n[2], t[2]);
+    }
+}
+
+/// Doggos in a [`VecEnv`] step on rayon's threads; each owns its MuJoCo data and its
+/// random stream, so they must match environments stepped one by one, bit for bit.
+#[test]
+fn doggos_stepped_in_parallel_match_doggos_stepped_one_by_one() {
+    assert!(Robot::Doggo.steps_in_parallel());
+    let (n, map) = (4, Map::by_name("walls").unwrap());
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let mut v = VecEnv::new(Robot::Doggo, map.clone(), n, 21).unwrap();
+    let mut alone: Vec<_> = (0..n).map(|_| make_env(Robot::Doggo, map.clone()).unwrap()).collect();
+    let (mut obs, mut one) = (vec![0.0; n * 58], vec![0.0; 58]);
+    pool.install(|| v.reset_all(21, &mut obs)).unwrap();
+    for (i, env) in alone.iter_mut().enumerate() {
+        env.reset_into(member_seed(21, i), None, &mut one).unwrap();
+        assert_eq!(&obs[i * 58..(i + 1) * 58], &one[..], "reset of env {i}");
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut steps = vec![Step::default(); n];
+    for t in 0..50 {
+        let actions: Vec<f64> = (0..n * 12).map(|_| rng.random_range(-1.0..1.0)).collect();
+        pool.install(|| v.step_all(&actions, &mut obs, &mut steps)).unwrap();
+        for (i, env) in alone.iter_mut().enumerate() {
+            let s = env.step_into(&actions[i * 12..(i + 1) * 12], &mut one).unwrap();
+            assert_eq!(&obs[i * 58..(i + 1) * 58], &one[..], "env {i} at step {t}");
+            assert_eq!(steps[i].fell, s.fell);
+        }
     }
 }
