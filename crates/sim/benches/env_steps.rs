@@ -9,7 +9,8 @@
 use std::hint::black_box;
 use std::time::Duration;
 
-use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use criterion::measurement::WallTime;
+use criterion::{BenchmarkGroup, BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use sim::{Robot, Step, VecEnv, make_env};
 
 const STEPS: usize = 1000;
@@ -65,21 +66,7 @@ fn vectorised(c: &mut Criterion) {
     let mut g = c.benchmark_group("env_vec64");
     g.throughput(Throughput::Elements((STEPS * n) as u64));
     for robot in Robot::NATIVE {
-        let mut v = VecEnv::new(robot, robot.default_map(), n, 3).unwrap();
-        let dim = v.act_dim();
-        let acts = actions(dim, n);
-        let mut obs = vec![0.0; n * v.obs_dim()];
-        let mut steps = vec![Step::default(); n];
-        g.bench_function(BenchmarkId::from_parameter(robot.name()), |b| {
-            b.iter(|| {
-                for t in 0..STEPS {
-                    let a = &acts[(t / 20) * dim * n..(t / 20 + 1) * dim * n];
-                    v.step_all(a, &mut obs, &mut steps).unwrap();
-                }
-                v.reset_all(5, &mut obs).unwrap();
-                black_box(&obs);
-            })
-        });
+        bench_vec(&mut g, robot, n);
     }
     g.finish();
 }
@@ -91,31 +78,33 @@ fn parallel(c: &mut Criterion) {
     let mut g = c.benchmark_group("env_vec8");
     g.throughput(Throughput::Elements((STEPS * n) as u64));
     for robot in Robot::ALL.into_iter().filter(|r| r.is_available() && r.steps_in_parallel()) {
-        let mut v = VecEnv::new(robot, robot.default_map(), n, 3).unwrap();
-        let dim = v.act_dim();
-        let acts = actions(dim, n);
-        let mut obs = vec![0.0; n * v.obs_dim()];
-        let mut steps = vec![Step::default(); n];
-        g.bench_function(BenchmarkId::from_parameter(robot.name()), |b| {
-            b.iter(|| {
-                for t in 0..STEPS {
-                    let a = &acts[(t / 20) * dim * n..(t / 20 + 1) * dim * n];
-                    v.step_all(a, &mut obs, &mut steps).unwrap();
-                    // A fallen robot stays fallen until reset; in training the
-                    // trainer resets it.
-                    for (i, s) in steps.iter().enumerate() {
-                        if s.fell {
-                            let mut o = vec![0.0; v.obs_dim()];
-                            v.envs_mut()[i].reset_into(t as u64, None, &mut o).unwrap();
-                        }
-                    }
-                }
-                v.reset_all(5, &mut obs).unwrap();
-                black_box(&obs);
-            })
-        });
+        bench_vec(&mut g, robot, n);
     }
     g.finish();
+}
+
+/// `n` environments of `robot` in one [`VecEnv`], [`STEPS`] steps; a fallen robot is
+/// reset, as the trainer does.
+fn bench_vec(g: &mut BenchmarkGroup<'_, WallTime>, robot: Robot, n: usize) {
+    let mut v = VecEnv::new(robot, robot.default_map(), n, 3).unwrap();
+    let dim = v.act_dim();
+    let acts = actions(dim, n);
+    let mut obs = vec![0.0; n * v.obs_dim()];
+    let mut one = vec![0.0; v.obs_dim()];
+    let mut steps = vec![Step::default(); n];
+    g.bench_function(BenchmarkId::from_parameter(robot.name()), |b| {
+        b.iter(|| {
+            for t in 0..STEPS {
+                let a = &acts[(t / 20) * dim * n..(t / 20 + 1) * dim * n];
+                v.step_all(a, &mut obs, &mut steps).unwrap();
+                for (i, _) in steps.iter().enumerate().filter(|(_, s)| s.fell) {
+                    v.envs_mut()[i].reset_into(t as u64, None, &mut one).unwrap();
+                }
+            }
+            v.reset_all(5, &mut obs).unwrap();
+            black_box(&obs);
+        })
+    });
 }
 
 criterion_group! {
