@@ -257,7 +257,10 @@ fn print_eval(r: &ControllerEval) {
         Some(s) => println!("mean steps to reach: {s:.1}"),
         None => println!("mean steps to reach: -"),
     }
-    println!("failures: {} collisions, {} time-outs (of {} episodes)", r.collisions, r.timeouts, r.episodes);
+    println!(
+        "failures: {} collisions, {} falls, {} time-outs (of {} episodes)",
+        r.collisions, r.falls, r.timeouts, r.episodes
+    );
 }
 
 fn eval(args: EvalArgs) -> Result<()> {

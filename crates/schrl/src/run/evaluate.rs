@@ -341,8 +341,12 @@ pub struct ControllerEval {
     pub success_rate: f64,
     /// Mean environment steps to reach the goal, over the successful episodes.
     pub mean_steps_to_reach: Option<f64>,
-    /// Episodes ended by a collision or a fall.
+    /// Episodes ended by a collision.
     pub collisions: usize,
+    /// Episodes ended by a fall (the Doggo; counted apart from collisions since
+    /// 2026-12-02, before which they were among them).
+    #[serde(default)]
+    pub falls: usize,
     /// Episodes that ran out of steps.
     pub timeouts: usize,
 }
@@ -420,14 +424,16 @@ impl ControllerEval {
     /// What `runs` achieved.
     pub fn of(runs: &[GoalEpisode]) -> Self {
         let episodes = runs.len();
-        let (mut successes, mut steps, mut collisions, mut timeouts) = (0usize, 0usize, 0usize, 0usize);
+        let (mut successes, mut steps) = (0usize, 0usize);
+        let (mut collisions, mut falls, mut timeouts) = (0usize, 0usize, 0usize);
         for r in runs {
             match r.episode.dispatcher.outcome() {
                 Some(Outcome::Completed) => {
                     successes += 1;
                     steps += r.episode.dispatcher.steps();
                 }
-                Some(Outcome::Collided | Outcome::Fell) => collisions += 1,
+                Some(Outcome::Collided) => collisions += 1,
+                Some(Outcome::Fell) => falls += 1,
                 Some(Outcome::TimedOut) | None => timeouts += 1,
             }
         }
@@ -436,6 +442,7 @@ impl ControllerEval {
             success_rate: successes as f64 / episodes.max(1) as f64,
             mean_steps_to_reach: (successes > 0).then(|| steps as f64 / successes as f64),
             collisions,
+            falls,
             timeouts,
         }
     }
