@@ -143,6 +143,15 @@ fn stands_at_its_standing_height_with_the_motors_off() {
     let joint_speed = obs[20..32].iter().map(|v| v.abs()).fold(0.0, f64::max);
     assert!(joint_speed < 1e-2, "joints still move at {joint_speed} rad/s");
     assert!(env.dynamics().up_axis()[2] > 0.99, "it stands level");
+    // What holds it up: the front hips pressed against their 15° limit, the rear hips
+    // bent forward against their springs.
+    let a = env.dynamics().motor_angles().map(f64::to_degrees);
+    for (leg, hip_y) in [(0, 1), (1, 4)] {
+        assert!((a[hip_y] - 15.0).abs() < 0.5, "front leg {leg}: hip y at {}°", a[hip_y]);
+    }
+    for hip_y in [7, 10] {
+        assert!((25.0..45.0).contains(&a[hip_y]), "rear hip y at {}°", a[hip_y]);
+    }
 }
 
 #[test]

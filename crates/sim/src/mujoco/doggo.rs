@@ -68,6 +68,9 @@ const PASSIVE: usize = 1;
 /// Free joint: 7 position numbers (x, y, z, quaternion w x y z), 6 velocity numbers.
 const FREE_NQ: usize = 7;
 const FREE_NV: usize = 6;
+/// Position and velocity numbers of the whole robot: the free joint and every hinge.
+const NQ: usize = FREE_NQ + JOINTS + PASSIVE;
+const NV: usize = FREE_NV + JOINTS + PASSIVE;
 
 /// A compiled model with the ids the robot needs.
 struct Compiled {
@@ -111,7 +114,7 @@ fn compile_for(map: &Map) -> Result<Arc<Compiled>, EnvError> {
         }
     };
     let m = model.ffi();
-    expect("position coordinates", m.nq as usize, FREE_NQ + JOINTS + PASSIVE)?;
+    expect("position coordinates", m.nq as usize, NQ)?;
     expect("actuators", m.nu as usize, JOINTS)?;
     expect("sensor values", m.nsensordata as usize, SENSORS)?;
     let walls = if matches!(map, Map::Walls(_)) {
@@ -242,10 +245,10 @@ impl Doggo {
         let len = |what: &str, got: usize, want: usize| {
             if got == want { Ok(()) } else { Err(format!("{what} has {got} numbers, expected {want}")) }
         };
-        len("qpos", s.qpos.len(), FREE_NQ + JOINTS + PASSIVE)?;
-        len("qvel", s.qvel.len(), FREE_NV + JOINTS + PASSIVE)?;
+        len("qpos", s.qpos.len(), NQ)?;
+        len("qvel", s.qvel.len(), NV)?;
         len("ctrl", s.ctrl.len(), JOINTS)?;
-        len("qacc_warmstart", s.qacc_warmstart.len(), FREE_NV + JOINTS + PASSIVE)?;
+        len("qacc_warmstart", s.qacc_warmstart.len(), NV)?;
         len("sensordata", s.sensordata.len(), SENSORS)?;
         self.data.set_time(s.time);
         self.data.qpos_mut().copy_from_slice(&s.qpos);
