@@ -105,6 +105,10 @@ fn every_experiment_runs_end_to_end_at_quick_size() {
     for key in ["network seconds per plan", "gradient plans satisfying", "mip seconds per plan"] {
         assert!(t5[key].is_number(), "{key}: {t5}");
     }
+    // Controllers: goals anywhere, and the short hops of a plan.
+    for r in results(&root.join("controllers")) {
+        assert!(r["rows"]["general controller, goals within 1 m"]["success rate"].is_number(), "{r}");
+    }
     // Table 6: the conditioned controller and the sums over 1, 2 and 4 options.
     assert_eq!(results(&root.join("table6"))[0]["rows"].as_object().unwrap().len(), 4);
     for picture in ["fig3.png", "fig3.svg", "fig4.png", "table3-4.png"] {

@@ -10,8 +10,8 @@ use rand_chacha::ChaCha8Rng;
 use schrl::control::policy::{ActorCritic, PolicyCache};
 use schrl::control::ppo::{Minibatch, loss_and_grad};
 use schrl::control::trainer::open_map;
-use schrl::control::{ControlConfig, ControlTrainer, PpoConfig};
-use schrl::run::evaluate::evaluate_controller as evaluate;
+use schrl::control::{ControlConfig, ControlTrainer, NearGoals, PpoConfig};
+use schrl::run::evaluate::{GoalDraw, evaluate_controller as evaluate};
 use schrl::store::{self, Existing, RunKind, RunWriter};
 use sim::Robot;
 
@@ -119,12 +119,12 @@ fn numbers(m: &schrl::control::ControlMetrics) -> String {
 fn a_tiny_budget_lowers_the_value_loss_and_beats_the_untrained_policy() {
     let mut t = ControlTrainer::new(tiny_config(Robot::Point, 3, 80_000)).unwrap();
     let map = open_map(Robot::Point);
-    let before = evaluate(&t.controller(), &map, 100, 99, 1000).unwrap();
+    let before = evaluate(&t.controller(), &map, 100, 99, 1000, GoalDraw::Anywhere).unwrap();
     let mut value_losses = Vec::new();
     while !t.finished() {
         value_losses.push(t.train_update().unwrap().update_stats.loss.value_loss);
     }
-    let after = evaluate(&t.controller(), &map, 100, 99, 1000).unwrap();
+    let after = evaluate(&t.controller(), &map, 100, 99, 1000, GoalDraw::Anywhere).unwrap();
     let early = value_losses[..3].iter().sum::<f32>();
     let late = value_losses[value_losses.len() - 3..].iter().sum::<f32>();
     assert!(late < early, "value loss did not fall: {value_losses:?}");
@@ -217,6 +217,11 @@ fn bad_configurations_name_the_field() {
     let mut c = tiny_config(Robot::Point, 0, 1000);
     c.map = "moon".into();
     assert!(ControlTrainer::new(c).err().unwrap().to_string().contains("moon"));
+    for bad in [NearGoals { fraction: 1.5, within: 1.0 }, NearGoals { fraction: 0.2, within: 0.0 }] {
+        let mut c = tiny_config(Robot::Car, 0, 1000);
+        c.near_goals = Some(bad);
+        assert!(ControlTrainer::new(c).err().unwrap().to_string().contains("near_goals"), "{bad:?}");
+    }
 }
 
 /// An option (paper App. K) chases its one goal: every reach ends the episode, and

@@ -20,6 +20,10 @@ use crate::map::Map;
 /// Bonus for reaching the goal (reference setup: "+20 on reaching it").
 pub const REACH_BONUS: f64 = 20.0;
 
+/// Draws [`Env::sample_goal_within`] tries before it falls back to any free goal
+/// (a ball that reaches free space is hit within a few dozen draws).
+pub const NEAR_GOAL_TRIES: usize = 1000;
+
 /// Default step limit of an episode (the Seq/Cover tasks' limit for ground robots).
 pub const DEFAULT_MAX_STEPS: usize = 1000;
 
@@ -219,6 +223,11 @@ pub trait Env: Send {
     fn set_max_steps(&mut self, max_steps: usize);
     /// A random free goal from the environment's generator (used by trainers).
     fn sample_goal(&mut self) -> Vec<f64>;
+    /// A random free goal beyond the reach radius and within `within` metres of the
+    /// robot (uniform in that ball, clipped to the map's region), from the
+    /// environment's generator; a goal from [`Env::sample_goal`] where none is found in
+    /// [`NEAR_GOAL_TRIES`] draws (a ball with no free point in it).
+    fn sample_goal_within(&mut self, within: f64) -> Vec<f64>;
     /// The whole mutable state (robot, goal, counters, random stream) as JSON, so a
     /// training run can be checkpointed and resumed exactly.
     fn save_state(&self) -> String;
@@ -493,6 +502,23 @@ impl<D: Dynamics> Env for GoalEnv<D> {
     }
 
     fn sample_goal(&mut self) -> Vec<f64> {
+        self.free_point()
+    }
+
+    fn sample_goal_within(&mut self, within: f64) -> Vec<f64> {
+        let (lo, hi) = self.map.region();
+        let at = self.robot.plan_position().to_vec();
+        let bounds: Vec<(f64, f64)> =
+            lo.iter().zip(&hi).zip(&at).map(|((l, h), c)| (l.max(c - within), h.min(c + within))).collect();
+        if bounds.iter().all(|(l, h)| l < h) {
+            for _ in 0..NEAR_GOAL_TRIES {
+                let p: Vec<f64> = bounds.iter().map(|(l, h)| self.rng.random_range(*l..*h)).collect();
+                let d = p.iter().zip(&at).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+                if d <= within && d > self.reach_radius && self.map.sdf(&p) > Self::clearance() {
+                    return p;
+                }
+            }
+        }
         self.free_point()
     }
 

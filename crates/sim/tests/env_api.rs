@@ -225,3 +225,28 @@ fn a_reach_radius_that_is_not_positive_and_finite_is_refused() {
     }
     assert_eq!(env.reach_radius(), 0.3, "a refused radius changes nothing");
 }
+
+#[test]
+fn near_goals_are_free_beyond_the_reach_radius_and_within_the_ball() {
+    for robot in [Robot::Point, Robot::Car, Robot::Drone] {
+        let map = robot.default_map();
+        let mut env = make_env(robot, map.clone()).unwrap();
+        env.reset(3, None).unwrap();
+        let at = env.position().to_vec();
+        let dist = |g: &[f64]| g.iter().zip(&at).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+        let goals: Vec<Vec<f64>> = (0..200).map(|_| env.sample_goal_within(1.0)).collect();
+        for g in &goals {
+            assert!(dist(g) <= 1.0 && dist(g) > env.reach_radius(), "{robot}: {g:?} from {at:?}");
+            assert!(map.sdf(g) > env.radius(), "{robot}: {g:?} is not free");
+        }
+        // Uniform in the ball beyond the reach radius r0: in d dimensions the mean
+        // distance is d/(d+1) (1 − r0^(d+1)) / (1 − r0^d).
+        let (d, r0) = (at.len() as f64, env.reach_radius());
+        let expected = d / (d + 1.0) * (1.0 - r0.powf(d + 1.0)) / (1.0 - r0.powf(d));
+        let mean = goals.iter().map(|g| dist(g)).sum::<f64>() / goals.len() as f64;
+        assert!((mean - expected).abs() < 0.05, "{robot}: mean distance {mean}, uniform {expected}");
+        // Far from every free point, the draw falls back to anywhere on the map.
+        let anywhere = env.sample_goal_within(1e-3);
+        assert!(map.sdf(&anywhere) > env.radius(), "{robot}");
+    }
+}

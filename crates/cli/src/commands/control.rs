@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use schrl::control::trainer::EVAL_SEED;
-use schrl::control::{ControlConfig, ControlMetrics, ControlTrainer, PpoConfig};
-use schrl::run::evaluate::{ControllerEval, GoalEpisode, evaluate_controller, goal_episodes};
+use schrl::control::{ControlConfig, ControlMetrics, ControlTrainer, NearGoals, PpoConfig};
+use schrl::run::evaluate::{ControllerEval, GoalDraw, GoalEpisode, evaluate_controller, goal_episodes};
 use schrl::store::{self, MetricsLog, RunKind, RunWriter};
 use sim::render::{ChartPanel, Goal, PathKind, Polyline, RobotMarker, Scene, Series};
 use sim::{Map, Robot};
@@ -47,6 +47,14 @@ pub struct TrainArgs {
     /// evaluation after training still draws random goals.
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     goal: Option<Vec<f64>>,
+    /// Share of random goals drawn near the robot (0–1; 0: every goal anywhere)
+    /// [default: the robot's, see the README's *Controller results*].
+    #[arg(long, value_name = "FRACTION")]
+    near_goals: Option<f64>,
+    /// Radius of the ball around the robot a near goal is drawn in (m) [default: the
+    /// robot's, else 1].
+    #[arg(long, value_name = "METRES")]
+    near_goals_within: Option<f64>,
     #[command(flatten)]
     run: super::RunDirArgs,
     /// Save a checkpoint every this many updates (and at the end).
@@ -75,6 +83,10 @@ pub struct EvalArgs {
     /// Step limit of an episode.
     #[arg(long, default_value_t = 1000, value_parser = super::count::<1, 1_000_000>)]
     max_steps: usize,
+    /// Draw each goal within this many metres of the start (beyond the reach radius)
+    /// instead of anywhere on the map: the short hops between a plan's waypoints.
+    #[arg(long, value_name = "METRES")]
+    goals_within: Option<f64>,
     /// Draw a few executed trajectories to this PNG or SVG.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -122,7 +134,18 @@ impl TrainArgs {
             config.total_steps = steps;
         }
         config.goal = self.goal.clone();
+        config.near_goals = self.near_goals(config.near_goals);
         Ok(config)
+    }
+
+    /// `--near-goals` and `--near-goals-within` over the robot's default.
+    fn near_goals(&self, default: Option<NearGoals>) -> Option<NearGoals> {
+        let base = default.unwrap_or(NearGoals { fraction: 0.0, within: 1.0 });
+        let n = NearGoals {
+            fraction: self.near_goals.unwrap_or(base.fraction),
+            within: self.near_goals_within.unwrap_or(base.within),
+        };
+        (n.fraction != 0.0 || self.near_goals_within.is_some()).then_some(n)
     }
 
     /// The saved settings, with a new step budget if given; other flags that differ
@@ -140,6 +163,11 @@ impl TrainArgs {
                 ("--preset", preset_differs),
                 ("--num-envs", differs(&self.num_envs, &saved.ppo.num_envs)),
                 ("--goal", self.goal.is_some() && self.goal != saved.goal),
+                (
+                    "--near-goals",
+                    (self.near_goals.is_some() || self.near_goals_within.is_some())
+                        && self.near_goals(saved.near_goals) != saved.near_goals,
+                ),
             ],
         )?;
         Ok(ControlConfig { total_steps: self.steps.unwrap_or(saved.total_steps), ..saved.clone() })
@@ -220,6 +248,7 @@ fn train(args: TrainArgs) -> Result<()> {
             args.eval_episodes,
             EVAL_SEED,
             trainer.config.episode_steps,
+            GoalDraw::Anywhere,
         )?;
         print_eval(&r);
     }
@@ -271,7 +300,12 @@ fn eval(args: EvalArgs) -> Result<()> {
     let controller = trainer.controller();
     let trained_map = trainer.config.map;
     let map = parse_map(args.map.as_deref().unwrap_or(&trained_map))?;
-    let runs = goal_episodes(&controller, &map, args.episodes, args.seed, args.max_steps)?;
+    let draw = match args.goals_within {
+        None => GoalDraw::Anywhere,
+        Some(r) if r.is_finite() && r > 0.0 => GoalDraw::Within(r),
+        Some(r) => bail!("--goals-within must be a positive number of metres, got {r}"),
+    };
+    let runs = goal_episodes(&controller, &map, args.episodes, args.seed, args.max_steps, draw)?;
     let r = ControllerEval::of(&runs);
     if let Some(out) = &args.out {
         draw_episodes(&runs, &map, out, args.force)?;

@@ -250,7 +250,12 @@ fn steps(e: Experiment, method: &str, b: &Base) -> Result<Vec<Step>> {
             steps.push(Step::train(None, "control train", flags, "run"));
             let episodes = if b.quick { "20" } else { "500" };
             let flags = strings(&["--ckpt", "@run", "--episodes", episodes]);
-            steps.push(Step::once("general controller", "control eval", flags));
+            steps.push(Step::once("general controller", "control eval", flags.clone()));
+            // The short hops of a plan (a start region overlapping a goal): where the
+            // Car's controller stalled with a goal beside or behind it.
+            let mut near = flags;
+            near.extend(strings(&["--goals-within", "1"]));
+            steps.push(Step::once("general controller, goals within 1 m", "control eval", near));
         }
         Experiment::Table6 => {
             // Its rows come from the runs' logs ([`super::record::options_rows`]).

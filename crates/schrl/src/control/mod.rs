@@ -13,4 +13,4 @@ pub mod trainer;
 
 pub use policy::ActorCritic;
 pub use ppo::{PpoConfig, PpoLearner};
-pub use trainer::{ControlConfig, ControlError, ControlMetrics, ControlTrainer, Controller};
+pub use trainer::{ControlConfig, ControlError, ControlMetrics, ControlTrainer, Controller, NearGoals};

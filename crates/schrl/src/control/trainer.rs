@@ -43,6 +43,42 @@ pub struct ControlConfig {
     /// reaching it. `None`: a goal-conditioned controller (random goals).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub goal: Option<Vec<f64>>,
+    /// Short hops: each random goal is drawn within [`NearGoals::within`] of the
+    /// robot with probability [`NearGoals::fraction`], else anywhere (the robot's
+    /// default, [`near_goals`]; runs saved before it existed have none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub near_goals: Option<NearGoals>,
+}
+
+/// A share of a goal-conditioned controller's random goals drawn near the robot.
+///
+/// Goals drawn anywhere on the map are rarely within a metre of the robot, yet a
+/// plan's hops often are (a start region that overlaps a goal, two waypoints at the
+/// edges of one goal), and a goal beside or behind a robot that cannot turn on the
+/// spot is a different skill from one ahead of it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NearGoals {
+    /// Probability that a goal is drawn near (0–1).
+    pub fraction: f64,
+    /// Radius of the ball around the robot a near goal is drawn in (m).
+    pub within: f64,
+}
+
+/// The near-goal share `robot` trains with by default, from its general controller's
+/// success on goals within 1 m (`schrl control eval --goals-within 1`, 300
+/// episodes). The Car's, trained on goals anywhere, reached 0.48–0.93 of them on
+/// the tuning seeds 100–104 (the rest timed out: the Car stood still, its mean
+/// action exactly zero, with the goal beside or behind it, an equilibrium of the
+/// closed loop that the policy's noise hides in training); with a quarter of its
+/// goals within 1 m and 2 M steps, 0.64–0.99 (median 0.96 against 0.87), goals
+/// anywhere 0.79–0.99 (README, *Controller results*). The Point (0.97) and the Drone
+/// (1.00) train on goals anywhere; the Doggo's is not measured.
+pub fn near_goals(robot: Robot) -> Option<NearGoals> {
+    match robot {
+        Robot::Car => Some(NearGoals { fraction: 0.25, within: 1.0 }),
+        _ => None,
+    }
 }
 
 impl ControlConfig {
@@ -57,6 +93,7 @@ impl ControlConfig {
             episode_steps: 1000,
             ppo: PpoConfig::reference(),
             goal: None,
+            near_goals: near_goals(robot),
         }
     }
 }
@@ -64,6 +101,14 @@ impl ControlConfig {
 /// Seed of the episodes of a controller evaluation (this project's fixed choice, so
 /// evaluations compare).
 pub const EVAL_SEED: u64 = 12345;
+
+/// A goal within [`NearGoals::within`] of the robot, with probability
+/// [`NearGoals::fraction`] (drawn from `rng`; nothing drawn without `near`); `None`:
+/// the environment's own draw stands.
+fn near_goal(near: Option<NearGoals>, rng: &mut ChaCha8Rng, env: &mut dyn sim::Env) -> Option<Vec<f64>> {
+    let n = near?;
+    (rng.random::<f64>() < n.fraction).then(|| env.sample_goal_within(n.within))
+}
 
 /// The open map a general controller trains on: `empty` for ground robots, `floor`
 /// for the Drone.
@@ -79,7 +124,9 @@ pub fn open_map(robot: Robot) -> Map {
 pub fn default_steps(robot: Robot) -> usize {
     match robot {
         Robot::Point => 1_000_000,
-        Robot::Car => 1_000_000,
+        // With a quarter of its goals near ([`near_goals`]); 1 M so trained settled
+        // early on 2 of 3 tuning seeds (0.50 and 0.68 of goals anywhere).
+        Robot::Car => 2_000_000,
         Robot::Drone => 400_000,
         // Not tuned here: the paper's Doggo runs use 1e8 steps in all (Fig. 3).
         Robot::Doggo => 10_000_000,
@@ -173,6 +220,13 @@ impl ControlTrainer {
         if config.episode_steps == 0 {
             return Err(ControlError::Config("episode_steps must be at least 1".into()));
         }
+        if let Some(n) = &config.near_goals
+            && !(n.fraction >= 0.0 && n.fraction <= 1.0 && n.within > 0.0 && n.within.is_finite())
+        {
+            return Err(ControlError::Config(format!(
+                "near_goals: fraction must be in [0, 1] and within a positive number of metres, got {n:?}"
+            )));
+        }
         if let Some(g) = &config.goal {
             let (low, high) = map.region();
             let inside = g.len() == map.dim()
@@ -197,6 +251,8 @@ impl ControlTrainer {
         for (e, o) in envs.envs_mut().iter_mut().zip(raw_obs.chunks_mut(od)) {
             if let Some(g) = &config.goal {
                 e.set_goal(g).map_err(|err| ControlError::Config(format!("goal {g:?}: {err}")))?;
+            } else if let Some(g) = near_goal(config.near_goals, &mut rng, e.as_mut()) {
+                e.set_goal(&g)?;
             }
             e.observe(o);
         }
@@ -325,7 +381,8 @@ impl ControlTrainer {
                     self.recent.push_goal(true);
                     self.recent.mark_reached(i);
                     if self.config.goal.is_none() {
-                        let goal = env.sample_goal();
+                        let goal = near_goal(self.config.near_goals, &mut self.rng, env.as_mut())
+                            .unwrap_or_else(|| env.sample_goal());
                         env.set_goal(&goal)?;
                         env.observe(o);
                     }
@@ -351,6 +408,10 @@ impl ControlTrainer {
                     env.reset_into(seed, None, o)?;
                     if let Some(g) = &self.config.goal {
                         env.set_goal(g)?;
+                        env.observe(o);
+                    } else if let Some(goal) = near_goal(self.config.near_goals, &mut self.rng, env.as_mut())
+                    {
+                        env.set_goal(&goal)?;
                         env.observe(o);
                     }
                 }

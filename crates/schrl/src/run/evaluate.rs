@@ -365,14 +365,27 @@ pub struct GoalEpisode {
     pub reach_radius: f64,
 }
 
+/// Where [`goal_episodes`] puts each episode's goal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GoalDraw {
+    /// Anywhere free on the map (what the controller trains on).
+    Anywhere,
+    /// Within this many metres of the start and beyond the reach radius
+    /// ([`sim::Env::sample_goal_within`]): the short hops a plan asks for, where a
+    /// goal is often beside or behind the robot.
+    Within(f64),
+}
+
 /// `episodes` single-goal episodes on `map` (random free start and goal from `seed`,
-/// mean actions, at most `max_steps` steps each), 64 environments at a time.
+/// the goal drawn as `draw` says; mean actions, at most `max_steps` steps each), 64
+/// environments at a time.
 pub fn goal_episodes(
     controller: &Controller,
     map: &Map,
     episodes: usize,
     seed: u64,
     max_steps: usize,
+    draw: GoalDraw,
 ) -> Result<Vec<GoalEpisode>, RunError> {
     const BATCH: usize = 64;
     let mut out = Vec::with_capacity(episodes);
@@ -387,6 +400,10 @@ pub fn goal_episodes(
         let mut dispatchers = Vec::with_capacity(n);
         for (e, o) in envs.envs_mut().iter_mut().zip(raw.chunks_mut(od)) {
             e.set_max_steps(max_steps);
+            if let GoalDraw::Within(r) = draw {
+                let g = e.sample_goal_within(r);
+                e.set_goal(&g)?;
+            }
             e.observe(o);
             goals.push(e.goal().to_vec());
             dispatchers.push(WaypointDispatcher::new(
@@ -416,8 +433,9 @@ pub fn evaluate_controller(
     episodes: usize,
     seed: u64,
     max_steps: usize,
+    draw: GoalDraw,
 ) -> Result<ControllerEval, RunError> {
-    Ok(ControllerEval::of(&goal_episodes(controller, map, episodes, seed, max_steps)?))
+    Ok(ControllerEval::of(&goal_episodes(controller, map, episodes, seed, max_steps, draw)?))
 }
 
 impl ControllerEval {
