@@ -160,7 +160,11 @@ fn save_run(dir: &std::path::Path, t: &ControlTrainer) {
 fn resuming_from_a_checkpoint_continues_exactly() {
     let dir = std::env::temp_dir().join(format!("schrl-control-resume-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let cfg = tiny_config(Robot::Car, 8, 8000);
+    // Near goals too: their draws come from the checkpointed random streams.
+    let cfg = ControlConfig {
+        near_goals: Some(NearGoals { fraction: 0.5, within: 1.0 }),
+        ..tiny_config(Robot::Car, 8, 8000)
+    };
     let mut straight = ControlTrainer::new(cfg.clone()).unwrap();
     let first = numbers(&straight.train_update().unwrap());
     save_run(&dir, &straight);

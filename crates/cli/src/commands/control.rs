@@ -47,12 +47,11 @@ pub struct TrainArgs {
     /// evaluation after training still draws random goals.
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     goal: Option<Vec<f64>>,
-    /// Share of random goals drawn near the robot (0–1; 0: every goal anywhere)
-    /// [default: the robot's, see the README's *Controller results*].
+    /// Share of random goals drawn near the robot (0–1) [default: 0, every goal
+    /// anywhere].
     #[arg(long, value_name = "FRACTION")]
     near_goals: Option<f64>,
-    /// Radius of the ball around the robot a near goal is drawn in (m) [default: the
-    /// robot's, else 1].
+    /// Radius of the ball around the robot a near goal is drawn in (m) [default: 1].
     #[arg(long, value_name = "METRES")]
     near_goals_within: Option<f64>,
     #[command(flatten)]
