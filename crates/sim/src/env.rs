@@ -24,6 +24,11 @@ pub const REACH_BONUS: f64 = 20.0;
 /// (a ball that reaches free space is hit within a few dozen draws).
 pub const NEAR_GOAL_TRIES: usize = 1000;
 
+/// Euclidean distance between two points of plan space.
+fn euclidean(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
+}
+
 /// Default step limit of an episode (the Seq/Cover tasks' limit for ground robots).
 pub const DEFAULT_MAX_STEPS: usize = 1000;
 
@@ -366,8 +371,7 @@ impl<D: Dynamics> GoalEnv<D> {
     }
 
     fn distance(&self) -> f64 {
-        let p = self.robot.plan_position();
-        p.iter().zip(&self.goal).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt()
+        euclidean(self.robot.plan_position(), &self.goal)
     }
 
     fn check_obs(obs: &[f64]) -> Result<(), EnvError> {
@@ -513,7 +517,7 @@ impl<D: Dynamics> Env for GoalEnv<D> {
         if bounds.iter().all(|(l, h)| l < h) {
             for _ in 0..NEAR_GOAL_TRIES {
                 let p: Vec<f64> = bounds.iter().map(|(l, h)| self.rng.random_range(*l..*h)).collect();
-                let d = p.iter().zip(&at).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+                let d = euclidean(&p, &at);
                 if d <= within && d > self.reach_radius && self.map.sdf(&p) > Self::clearance() {
                     return p;
                 }

@@ -137,9 +137,10 @@ impl TrainArgs {
         Ok(config)
     }
 
-    /// `--near-goals` and `--near-goals-within` over the robot's default.
-    fn near_goals(&self, default: Option<NearGoals>) -> Option<NearGoals> {
-        let base = default.unwrap_or(NearGoals { fraction: 0.0, within: 1.0 });
+    /// `--near-goals` and `--near-goals-within` over `base` (the config's, or a saved
+    /// run's); `None` when no goal is drawn near.
+    fn near_goals(&self, base: Option<NearGoals>) -> Option<NearGoals> {
+        let base = base.unwrap_or(NearGoals { fraction: 0.0, within: 1.0 });
         let n = NearGoals {
             fraction: self.near_goals.unwrap_or(base.fraction),
             within: self.near_goals_within.unwrap_or(base.within),

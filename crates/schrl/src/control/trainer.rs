@@ -58,8 +58,8 @@ pub struct ControlConfig {
 /// from one ahead of it.
 ///
 /// No robot trains with near goals by default. Measured on the Car, whose general
-/// controller trained on goals anywhere reached 0.48–0.93 of goals within 1 m on the tuning seeds 100–104 (`schrl control eval
-/// --goals-within 1`; the rest timed out with the Car standing still, its mean action
+/// controller trained on goals anywhere reached 0.48–0.93 of goals within 1 m on the
+/// tuning seeds 100–104 (`schrl control eval --goals-within 1`; the rest timed out with the Car standing still, its mean action
 /// exactly zero, the goal beside or behind it: an equilibrium of the closed loop that
 /// the policy's noise hides in training). A quarter of its goals within 1 m and 2 M
 /// steps raised that to 0.64–0.99 (median 0.96 against 0.87), but Car Loop with such
