@@ -172,3 +172,22 @@ fn a_robustness_cap_gives_a_shorter_plan_at_least_that_robust() {
     let e = mip::plan(&task, &[-3.0, -1.0], &bad).unwrap_err();
     assert!(e.to_string().contains("mip.robustness_cap"), "{e}");
 }
+
+#[test]
+fn alternating_between_goals_is_solved_through_claims() {
+    // Loop's shape on two goals: at a goal at every waypoint, never the same one twice
+    // in a row. The best plan alternates between the centres (robustness 0.5, the
+    // radius); keeping out of one goal is decided by the claim to be in the other.
+    let spec = "G[1,4] (a | b) & G[1,3] ((a -> !X a) & (b -> !X b))";
+    let p = plan(&open(spec), [-3.0, -1.0]);
+    assert!(p.optimal && p.satisfied(), "{p:?}");
+    assert!(close(p.program_robustness, 0.5, 1e-6) && close(p.robustness, 0.5, 1e-6), "{p:?}");
+    let goal = |t: usize| if waypoint(&p, t)[0] > 0.0 { 'a' } else { 'b' };
+    for t in 1..4 {
+        assert_ne!(goal(t), goal(t + 1), "{:?}", p.path);
+    }
+    // Keeping out of the hazard at a waypoint the plan cannot spend at a goal: the
+    // claims are lower bounds there too.
+    let p = plan(&open("F[1,1] !hazard & G[1,2] !a & F[2,2] b"), [1.0, 1.5]);
+    assert!(p.optimal && p.satisfied() && p.program_robustness <= p.robustness + 1e-9, "{p:?}");
+}

@@ -17,14 +17,29 @@
 //! until readings, so the program's robustness is that of [`stl::Spec`] with the
 //! predicates replaced by their [`Shape`]s.
 //!
-//! Clauses that keep out of a goal (they negate one, e.g. Loop's `l0 → ¬○l0`) and look at
-//! one waypoint and its next (no `◇`, `□`, `U` inside) are *lazy* where they are
-//! operands of a conjunction in positive position: until a round of
+//! Clauses that keep out of something (they negate, e.g. an avoid region) and look at
+//! one waypoint and its next (no `◇`, `□`, `U` inside) are *lazy*, in a program without
+//! claims (below), where they are operands of a conjunction in positive position: until a round of
 //! [`super::plan`] finds a plan that violates one of them at some waypoint, that
 //! occurrence is left out (read as `⊤`). Leaving out a conjunct only raises the
 //! optimum, and the robustness is monotone in every positive occurrence, so a plan
 //! whose left-out occurrences are all at least the optimum `ρ*` has robustness at
 //! least `ρ*` (for any min-max formula, `f(s ∧ c) ≥ f(s) ∧ c`).
+//!
+//! *Claims* (specs that keep out of a goal disc, as Loop's and Signal's alternation):
+//! each waypoint `t` and goal disc `j` has one binary `a_tj`, shared by every `max`
+//! that mentions it, standing for "waypoint `t` is in `j`". Reaching `j` at `t` as an
+//! option of a `max` is gated by `a_tj` instead of a binary of its own; staying out of
+//! disc `k` at `t` gains the options `ρ̃_j(x_t) + gap_jk`, gated by `a_tj`, for every
+//! other disc `j` with `gap_jk = ‖c_j − c_k‖ − r_j − r_k > 0`. That is a lower bound
+//! everywhere (triangle inequality: `‖x − c_k‖ − r_k ≥ r_j − ‖x − c_j‖ + gap_jk`), so
+//! any claim is sound; a `max` with claimed options asks `Σ own bᵢ + Σ claims ≥ 1`. So
+//! a plan that is at some goal at every waypoint, as Loop's, needs none of the tangent
+//! binaries to keep out of the others: choosing the corners decides the alternation.
+//! Two `max`es that mention the same goal at the same waypoint share its claim, which
+//! can only lower the optimum, never make it unsound; specs that never keep out of a
+//! goal are encoded without claims. With claims no clause is lazy: left out one
+//! waypoint at a time, Loop's alternation was violated somewhere new round after round.
 //!
 //! Every value carries an interval `[lo, hi]` from the plan region, so each big-M is
 //! the tightest the interval allows (`Mᵢ = hi(r) − lo(rᵢ)`), and operands that can
@@ -62,6 +77,20 @@ impl Rob {
             Rob::Lin { lo, hi, .. } => (*lo, *hi),
         }
     }
+
+    /// The value plus `d`.
+    fn plus(self, d: f64) -> Rob {
+        match self {
+            Rob::Const(c) => Rob::Const(c + d),
+            Rob::Lin { e, lo, hi } => Rob::Lin { e: e + d, lo: lo + d, hi: hi + d },
+        }
+    }
+}
+
+/// An operand of a `max`: with a binary of its own, or gated by a claim.
+enum Opt {
+    Own(Rob),
+    Claimed(Rob, Variable),
 }
 
 /// The program under construction: waypoint variables, constraints, binaries.
@@ -74,6 +103,8 @@ pub(super) struct Program {
     pub x: Vec<[Variable; 2]>,
     /// Binary variables, in the order they were created.
     pub binaries: Vec<Variable>,
+    /// Claims: "waypoint `t` is in goal disc `j`", by `(t, j)`.
+    claims: HashMap<(usize, usize), Variable>,
     start: [f64; 2],
     lo: [f64; 2],
     hi: [f64; 2],
@@ -85,7 +116,7 @@ impl Program {
     pub fn new(start: [f64; 2], steps: usize, (lo, hi): ([f64; 2], [f64; 2])) -> Self {
         let mut vars = ProblemVariables::new();
         let x = (0..steps).map(|_| [0, 1].map(|k| vars.add(variable().min(lo[k]).max(hi[k])))).collect();
-        Self { vars, constraints: vec![], x, binaries: vec![], start, lo, hi }
+        Self { vars, constraints: vec![], x, binaries: vec![], claims: HashMap::new(), start, lo, hi }
     }
 
     /// The start (waypoint 0).
@@ -181,6 +212,48 @@ impl Program {
         Rob::Lin { e: r.into(), lo, hi }
     }
 
+    /// The claim that waypoint `t` is in goal disc `disc` (one binary, made once).
+    fn claim(&mut self, t: usize, disc: usize) -> Variable {
+        if let Some(&a) = self.claims.get(&(t, disc)) {
+            return a;
+        }
+        let a = self.vars.add(variable().binary());
+        self.binaries.push(a);
+        self.claims.insert((t, disc), a);
+        a
+    }
+
+    /// `max` of operands with binaries of their own and operands gated by claims:
+    /// `r ≤ eᵢ + Mᵢ (1 − bᵢ)` for either kind, `Σ bᵢ + Σ claims ≥ 1`. A claim may be set
+    /// by another `max`, so `r`'s least value is the least of the operands' (it must
+    /// stay feasible under any operand), not the greatest.
+    fn max_claimed(&mut self, own: Vec<Rob>, claimed: Vec<(Rob, Variable)>) -> Rob {
+        if claimed.is_empty() {
+            return self.max(own);
+        }
+        let bounds = own.iter().chain(claimed.iter().map(|(r, _)| r)).map(Rob::bounds);
+        let (lo, hi) = bounds.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), (a, b)| (l.min(a), h.max(b)));
+        let r = self.value(lo, hi);
+        let mut chosen = Expression::from(0.0);
+        let gates = own.into_iter().map(|e| (e, None)).chain(claimed.into_iter().map(|(e, a)| (e, Some(a))));
+        for (e, gate) in gates {
+            let b = gate.unwrap_or_else(|| {
+                let b = self.vars.add(variable().binary());
+                self.binaries.push(b);
+                b
+            });
+            chosen += b;
+            let (l, e) = match e {
+                Rob::Const(c) => (c, Expression::from(c)),
+                Rob::Lin { e, lo, .. } => (lo, e),
+            };
+            // r ≤ e + (hi − l)(1 − b)
+            self.constraints.push((Expression::from(r) + (hi - l) * b).leq(e + (hi - l)));
+        }
+        self.constraints.push(chosen.geq(1.0));
+        Rob::Lin { e: r.into(), lo, hi }
+    }
+
     /// The value of a shape.
     fn shape(&mut self, s: &Shape) -> Rob {
         match s {
@@ -241,19 +314,56 @@ pub(super) struct Encoder<'a> {
     /// The robustness of `true`.
     top: f64,
     memo: HashMap<(usize, usize, bool), Rob>,
+    /// The goal discs `(name, centre, radius)` when the spec keeps out of one (claims
+    /// are used); empty otherwise.
+    discs: Vec<(String, [f64; 2], f64)>,
+    /// Each disc's inscribed polygon at each waypoint, by `(t, disc)`.
+    polygons: HashMap<(usize, usize), Rob>,
+    /// Whether keeping out of a disc that has claims also gets its tangents.
+    tangents: bool,
+    /// Whether some keep-out went without its tangents.
+    without_tangents: bool,
 }
 
 impl<'a> Encoder<'a> {
-    /// An encoder writing into `program`.
+    /// An encoder writing `root`'s sub-formulas into `program` (claims if `root` keeps
+    /// out of a goal disc; then, without `tangents`, keeping out of a disc is by the
+    /// claims alone wherever another disc gives one: a lower bound of the full program).
     pub fn new(
         program: &'a mut Program,
         atoms: &'a Atoms,
         active: &'a HashSet<Occurrence>,
-        until: UntilRule,
-        top: f64,
+        (until, top): (UntilRule, f64),
+        root: &Formula,
+        tangents: bool,
     ) -> Self {
         let n = program.x.len() + 1;
-        Self { program, atoms, active, omitted: vec![], n, until, top, memo: HashMap::new() }
+        let mut discs = atoms.goal_discs();
+        if !keeps_out_of_a_goal(root, true, &discs) {
+            discs.clear();
+        }
+        let (memo, polygons) = (HashMap::new(), HashMap::new());
+        let omitted = vec![];
+        let without_tangents = false;
+        Self {
+            program,
+            atoms,
+            active,
+            omitted,
+            n,
+            until,
+            top,
+            memo,
+            discs,
+            polygons,
+            tangents,
+            without_tangents,
+        }
+    }
+
+    /// Whether some keep-out was encoded by its claims alone (see [`Encoder::new`]).
+    pub fn without_tangents(&self) -> bool {
+        self.without_tangents
     }
 
     /// The lazy occurrences left out of the program.
@@ -307,7 +417,9 @@ impl<'a> Encoder<'a> {
         let mut out = Vec::with_capacity(fs.len() * at.len());
         for &f in fs {
             for &t in at {
-                if lazy_kind(f) && !self.active.contains(&(address(f), t)) {
+                // With claims a keep-out is cheap, and left out one waypoint at a time its
+                // violations moved round after round (Loop: 2 of 5 starts within 30 s).
+                if lazy_kind(f) && self.discs.is_empty() && !self.active.contains(&(address(f), t)) {
                     if !self.omitted.iter().any(|&(g, u)| address(g) == address(f) && u == t) {
                         self.omitted.push((f, t));
                     }
@@ -326,7 +438,7 @@ impl<'a> Encoder<'a> {
             // no big-M between the levels).
             let mut options = vec![];
             self.options(f, t, positive, &mut options)?;
-            return Ok(self.combine(false, true, options));
+            return Ok(self.max_of(options));
         }
         Ok(match f {
             Formula::True => Rob::Const(sign * self.top),
@@ -392,8 +504,29 @@ impl<'a> Encoder<'a> {
     }
 
     fn atom(&mut self, name: &str, t: usize, sign: f64, offset: f64) -> Result<Rob, MipError> {
+        if sign < 0.0 && t >= 1 && self.discs.iter().any(|d| d.0 == name) {
+            // Keeping out of a goal disc: its tangents and the claims of the other discs.
+            let mut options = vec![];
+            self.atom_options(name, t, sign, offset, &mut options)?;
+            return Ok(self.max_of(options));
+        }
         let shape = self.atoms.shape(name, t, sign, offset)?;
         Ok(self.program.shape(&shape))
+    }
+
+    /// The `max` of options, own and claimed.
+    fn max_of(&mut self, options: Vec<Opt>) -> Rob {
+        if options.is_empty() {
+            return Rob::Const(-self.top);
+        }
+        let (mut own, mut claimed) = (vec![], vec![]);
+        for o in options {
+            match o {
+                Opt::Own(r) => own.push(r),
+                Opt::Claimed(r, a) => claimed.push((r, a)),
+            }
+        }
+        self.program.max_claimed(own, claimed)
     }
 
     /// Whether `f` (negated unless `positive`) is a `max` of its operands.
@@ -412,7 +545,7 @@ impl<'a> Encoder<'a> {
         f: &'a Formula,
         t: usize,
         positive: bool,
-        out: &mut Vec<Rob>,
+        out: &mut Vec<Opt>,
     ) -> Result<(), MipError> {
         let sign = if positive { 1.0 } else { -1.0 };
         match f {
@@ -437,7 +570,7 @@ impl<'a> Encoder<'a> {
                 let s = sign * op.sign();
                 self.atom_options(signal, t, s, -s * threshold, out)?
             }
-            _ => out.push(self.encode(f, t, positive)?),
+            _ => out.push(Opt::Own(self.encode(f, t, positive)?)),
         }
         Ok(())
     }
@@ -448,12 +581,63 @@ impl<'a> Encoder<'a> {
         t: usize,
         sign: f64,
         offset: f64,
-        out: &mut Vec<Rob>,
+        out: &mut Vec<Opt>,
     ) -> Result<(), MipError> {
-        match self.atoms.shape(name, t, sign, offset)? {
-            Shape::Max(pieces) => out.extend(pieces.iter().map(|p| self.program.shape(p))),
-            shape => out.push(self.program.shape(&shape)),
+        let shape = self.atoms.shape(name, t, sign, offset)?;
+        let disc = self.discs.iter().position(|d| d.0 == name).filter(|_| t >= 1);
+        if let Some(k) = disc {
+            if sign > 0.0 {
+                // Reaching disc k: gated by the claim that waypoint t is in it.
+                let a = self.program.claim(t, k);
+                out.push(Opt::Claimed(self.polygon(t, k)?.plus(offset), a));
+                return Ok(());
+            }
+            // Keeping out of disc k: being in another disc j is at least gap_jk out.
+            let (ck, rk) = (self.discs[k].1, self.discs[k].2);
+            let mut claimed = false;
+            for j in 0..self.discs.len() {
+                let (cj, rj) = (self.discs[j].1, self.discs[j].2);
+                let gap = (cj[0] - ck[0]).hypot(cj[1] - ck[1]) - rj - rk;
+                if j != k && gap > 0.0 {
+                    let a = self.program.claim(t, j);
+                    out.push(Opt::Claimed(self.polygon(t, j)?.plus(gap + offset), a));
+                    claimed = true;
+                }
+            }
+            if claimed && !self.tangents {
+                self.without_tangents = true;
+                return Ok(());
+            }
+        }
+        match shape {
+            Shape::Max(pieces) => out.extend(pieces.iter().map(|p| Opt::Own(self.program.shape(p)))),
+            shape => out.push(Opt::Own(self.program.shape(&shape))),
         }
         Ok(())
+    }
+
+    /// Disc `disc`'s inscribed polygon at waypoint `t ≥ 1` (encoded once).
+    fn polygon(&mut self, t: usize, disc: usize) -> Result<Rob, MipError> {
+        if let Some(r) = self.polygons.get(&(t, disc)) {
+            return Ok(r.clone());
+        }
+        let shape = self.atoms.shape(&self.discs[disc].0, t, 1.0, 0.0)?;
+        let r = self.program.shape(&shape);
+        self.polygons.insert((t, disc), r.clone());
+        Ok(r)
+    }
+}
+
+/// Whether `f` (negated unless `positive`) keeps out of one of the goal discs somewhere.
+fn keeps_out_of_a_goal(f: &Formula, positive: bool, discs: &[(String, [f64; 2], f64)]) -> bool {
+    let goal = |name: &str| discs.iter().any(|d| d.0 == name);
+    match f {
+        Formula::Atom(name) => !positive && goal(name),
+        Formula::Compare { signal, op, .. } => (positive == (op.sign() < 0.0)) && goal(signal),
+        Formula::Not(c) => keeps_out_of_a_goal(c, !positive, discs),
+        Formula::Implies(l, r) => {
+            keeps_out_of_a_goal(l, !positive, discs) || keeps_out_of_a_goal(r, positive, discs)
+        }
+        _ => f.children().any(|c| keeps_out_of_a_goal(c, positive, discs)),
     }
 }

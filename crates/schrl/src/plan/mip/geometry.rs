@@ -114,6 +114,23 @@ impl Atoms {
         Ok(Atoms { geometry, exact, start: start.to_vec(), sides, outside_sides })
     }
 
+    /// The goal discs read at waypoints, `(name, centre, radius)`, sorted by name: where
+    /// a waypoint can be claimed to be (the encoding's claims).
+    pub(super) fn goal_discs(&self) -> Vec<(String, [f64; 2], f64)> {
+        let mut discs: Vec<_> = self
+            .geometry
+            .iter()
+            .filter_map(|(name, g)| match *g {
+                Geometry::Disc { center, radius, along_segments: false } => {
+                    Some((name.clone(), center, radius))
+                }
+                _ => None,
+            })
+            .collect();
+        discs.sort_by(|a, b| a.0.cmp(&b.0));
+        discs
+    }
+
     /// `sign · value(name) + offset` at waypoint `t` as a shape (`sign` is ±1).
     pub(super) fn shape(&self, name: &str, t: usize, sign: f64, offset: f64) -> Result<Shape, MipError> {
         let unknown = || MipError::Unsupported(format!("the name '{name}', which the task does not bind"));

@@ -172,7 +172,8 @@ pub struct MipPlan {
     pub binaries: usize,
     /// Constraints in the program.
     pub constraints: usize,
-    /// Programs solved: one, plus one per round that found left-out clauses violated.
+    /// Programs solved: one, plus one per round that found left-out clauses violated,
+    /// plus one if keeping out of goals by claims alone fell short of the cap.
     pub rounds: usize,
 }
 
@@ -204,9 +205,14 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
     // The plan of the last round, for a time-out in the next.
     let mut last: Option<MipPlan> = None;
     let timed_out = |e: &MipError| matches!(e, MipError::TimeOut(_));
+    // With a cap, keeping out of a goal goes first by the claims alone (a lower bound of
+    // the full program, without its tangent binaries): a plan at the cap is as good as
+    // any; short of it, the tangents are added.
+    let mut tangents = cfg.robustness_cap.is_none();
     for round in 1.. {
         // Stage 1: the most robust plan (the discrete choices that matter).
-        let most = Built::new(task, &formula, &atoms, &active, start)?;
+        let most = Built::new(task, &formula, &atoms, &active, start, tangents)?;
+        let without_tangents = most.without_tangents;
         let (binaries, constraints) = (most.program.binaries.len(), most.program.constraints.len());
         let mut most = most;
         let root = match cfg.robustness_cap {
@@ -222,8 +228,12 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
             Err(e) if timed_out(&e) && last.is_some() => return Ok(out_of_time(last, t0)),
             other => other?,
         };
+        if without_tangents && cfg.robustness_cap.is_some_and(|cap| best < cap - 1e-6) {
+            tangents = true;
+            continue;
+        }
         // Stage 2: with those choices fixed, the shortest plan as robust (a linear program).
-        let mut short = Built::new(task, &formula, &atoms, &active, start)?;
+        let mut short = Built::new(task, &formula, &atoms, &active, start, tangents)?;
         debug_assert_eq!(short.program.binaries.len(), choices.len(), "the encoding is deterministic");
         for (b, v) in short.program.binaries.clone().into_iter().zip(choices) {
             short.program.constraints.push(Expression::from(b).eq(v.round()));
@@ -286,6 +296,8 @@ struct Built {
     root: Expression,
     /// Lazy occurrences left out: (address, the clause) and the waypoint.
     omitted: Vec<((usize, Formula), usize)>,
+    /// Whether some keep-out went by its claims alone.
+    without_tangents: bool,
 }
 
 /// What a solve gives: waypoints, the binaries' values, the root's value.
@@ -298,19 +310,28 @@ impl Built {
         atoms: &geometry::Atoms,
         active: &HashSet<encode::Occurrence>,
         start: &[f64],
+        tangents: bool,
     ) -> Result<Built, MipError> {
         let (lo, hi) = task.map.region();
         let mut program =
             encode::Program::new([start[0], start[1]], task.steps, ([lo[0], lo[1]], [hi[0], hi[1]]));
-        let mut encoder = encode::Encoder::new(&mut program, atoms, active, UNTIL, Semantics::hard().top);
+        let mut encoder = encode::Encoder::new(
+            &mut program,
+            atoms,
+            active,
+            (UNTIL, Semantics::hard().top),
+            formula,
+            tangents,
+        );
         let root = encoder.encode(formula, 0, true)?;
         let omitted =
             encoder.omitted().iter().map(|&(f, t)| ((f as *const Formula as usize, f.clone()), t)).collect();
+        let without_tangents = encoder.without_tangents();
         let root = match root {
             encode::Rob::Const(c) => Expression::from(c),
             encode::Rob::Lin { e, .. } => e,
         };
-        Ok(Built { program, root, omitted })
+        Ok(Built { program, root, omitted, without_tangents })
     }
 
     /// The plan's 1-norm length `Σ |x_t − x_{t−1}|` through `s ≥ ±(x_t − x_{t−1})`, with
