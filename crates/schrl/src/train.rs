@@ -372,6 +372,7 @@ fn save_curve(history: &[JointMetrics], out: &Path) -> Result<(), RunError> {
             })
             .collect(),
         band: vec![],
+        colour: None,
     };
     let panels = [
         ChartPanel {

@@ -96,6 +96,7 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
             label: "executed runs".into(),
             points: vec![(0.0, 0.2), (2e6, 0.9)],
             band: vec![],
+            colour: None,
         }],
         y_range: Some((0.0, 1.0)),
         y_label: y.into(),
@@ -146,6 +147,30 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
     let svg = tmp("duck.svg");
     save(&scene("duck"), &svg, false).unwrap();
     assert!(std::fs::read_to_string(&svg).unwrap().contains("z (m)"), "the side view's axis");
+}
+
+#[test]
+fn a_series_keeps_its_colour_in_a_panel_that_lacks_the_others() {
+    // Fig. 3's Loop panel without HTLTL drew TLTL in HTLTL's blue.
+    use sim::render::{ChartPanel, Series, save_chart};
+    let panel = |colour| ChartPanel {
+        series: vec![Series {
+            label: "tltl".into(),
+            points: vec![(0.0, -1.0), (1.0, -2.0)],
+            band: vec![],
+            colour,
+        }],
+        y_range: None,
+        y_label: "spec score".into(),
+        reference: None,
+    };
+    let (third, first) = (tmp("third.svg"), tmp("first.svg"));
+    save_chart(&[panel(Some(2))], "environment steps", &third, false).unwrap();
+    save_chart(&[panel(None)], "environment steps", &first, false).unwrap();
+    // The palette's third colour is the goals' green, its first the executed orange.
+    let third = std::fs::read_to_string(&third).unwrap().to_uppercase();
+    assert!(third.contains("#28AA50"), "the series is not in the palette's third colour");
+    assert!(!std::fs::read_to_string(&first).unwrap().to_uppercase().contains("#28AA50"));
 }
 
 #[test]

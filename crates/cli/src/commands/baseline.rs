@@ -498,6 +498,7 @@ fn save_curve<M: EpisodeStats>(history: &[M], out: &std::path::Path) -> Result<(
             .filter(|(_, y)| y.is_finite())
             .collect(),
         band: vec![],
+        colour: None,
     };
     let panels = [
         ChartPanel {

@@ -261,6 +261,7 @@ fn save_curve(history: &[ControlMetrics], out: &Path) -> Result<()> {
         label: label.into(),
         points: history.iter().filter_map(|m| f(m).map(|y| (m.steps as f64, y))).collect(),
         band: vec![],
+        colour: None,
     };
     let panels = [
         ChartPanel {

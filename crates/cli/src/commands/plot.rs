@@ -314,10 +314,14 @@ pub fn save_curves(runs: &[CurveRun], bins: usize, out: &Path, force: bool) -> R
         .flat_map(|(_, r)| r.iter().flat_map(|c| c.points.last()))
         .map(|p| p.0)
         .fold(0.0, f64::max);
-    let mut tasks: Vec<String> = vec![];
-    for ((task, _), _) in &cells {
+    // Tasks in the order given, and each method's colour the same in every panel.
+    let (mut tasks, mut methods): (Vec<String>, Vec<String>) = (vec![], vec![]);
+    for ((task, method), _) in &cells {
         if !tasks.contains(task) {
             tasks.push(task.clone());
+        }
+        if !methods.contains(method) {
+            methods.push(method.clone());
         }
     }
     let panels: Vec<ChartPanel> = tasks
@@ -348,6 +352,7 @@ pub fn save_curves(runs: &[CurveRun], bins: usize, out: &Path, force: bool) -> R
                         ),
                         points,
                         band,
+                        colour: methods.iter().position(|m| m == method),
                     }
                 })
                 .collect();

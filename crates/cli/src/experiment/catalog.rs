@@ -103,6 +103,25 @@ pub fn cells(e: Experiment, sel: &Selection) -> Result<Vec<Cell>> {
     Ok(cells)
 }
 
+/// Where a cell of `experiment` (by name) sits in the experiment's full list, whatever
+/// selection it ran in: robot, task, seed, method, as [`cells`] orders them (names the
+/// experiment does not have go last). A record's `cell` is its position in the list of
+/// the run that made it, which differs between `--tasks` or `--methods` selections.
+pub fn rank(
+    experiment: &str,
+    robot: &str,
+    task: &str,
+    method: &str,
+    seed: u64,
+) -> (usize, usize, u64, usize) {
+    let Some(&e) = Experiment::ALL.iter().find(|e| e.name() == experiment) else {
+        return (usize::MAX, usize::MAX, seed, usize::MAX);
+    };
+    let ax = axes(e);
+    let at = |all: &[&str], x: &str| all.iter().position(|a| *a == x).unwrap_or(usize::MAX);
+    (at(ax.robots, robot), at(ax.tasks, task), seed, at(ax.methods, method))
+}
+
 /// What every step of a cell shares.
 struct Base<'a> {
     robot: &'a str,

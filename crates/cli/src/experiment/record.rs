@@ -151,7 +151,8 @@ pub fn write(cell_dir: &Path, record: &Record) -> Result<()> {
 /// A cell's record file.
 pub const RECORD: &str = "record.json";
 
-/// Every record under `dir/cells/`, ordered by experiment, then cell position, then id.
+/// Every record under `dir/cells/`, ordered by experiment, then the cell's place in the
+/// experiment's full list ([`super::catalog::rank`]), then id.
 pub fn all(dir: &Path) -> Result<Vec<Record>> {
     let cells = dir.join("cells");
     let mut records = Vec::new();
@@ -166,7 +167,8 @@ pub fn all(dir: &Path) -> Result<Vec<Record>> {
             records.push(r);
         }
     }
-    records.sort_by(|a, b| (&a.experiment, a.cell, &a.id).cmp(&(&b.experiment, b.cell, &b.id)));
+    let rank = |r: &Record| super::catalog::rank(&r.experiment, &r.robot, &r.task, &r.method, r.seed);
+    records.sort_by(|a, b| (&a.experiment, rank(a), &a.id).cmp(&(&b.experiment, rank(b), &b.id)));
     Ok(records)
 }
 
@@ -203,6 +205,36 @@ pub fn read_results(path: &Path) -> Result<Vec<Record>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn merged_records_follow_the_full_list_whatever_selection_ran_them() {
+        // Signal's cells ran with `--tasks signal` (positions 0, 1), Seq's with every
+        // task (positions 0–2 too): ordered by position, the rows came out interleaved.
+        let dir = std::env::temp_dir().join(format!("schrl-merge-order-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let record = |task: &str, method: &str, cell: usize| Record {
+            experiment: "fig3".into(),
+            cell,
+            id: format!("point-{task}-{method}-0"),
+            robot: "point".into(),
+            task: task.into(),
+            method: method.into(),
+            seed: 0,
+            quick: false,
+            rows: BTreeMap::new(),
+            commands: vec![],
+            commit: "abc".into(),
+            seconds: 1.0,
+        };
+        for r in [record("signal", "htltl", 1), record("signal", "schrl", 0), record("seq", "tltl", 2)] {
+            let cell = dir.join("cells").join(&r.id);
+            std::fs::create_dir_all(&cell).unwrap();
+            write(&cell, &r).unwrap();
+        }
+        let ids: Vec<String> = merge(&dir).unwrap().into_iter().map(|r| r.id).collect();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(ids, ["point-seq-tltl-0", "point-signal-schrl-0", "point-signal-htltl-0"]);
+    }
 
     #[test]
     fn metrics_are_read_off_the_lines_commands_print() {

@@ -25,6 +25,15 @@ pub struct Series {
     /// A band drawn under the line in its colour, light: `(x, low, high)` (e.g. mean ±
     /// std over seeds); empty: none. Non-finite entries are skipped.
     pub band: Vec<(f64, f64, f64)>,
+    /// Its place in the palette; `None`: its place in the panel. Set it to keep a
+    /// method's colour across panels that lack some methods.
+    pub colour: Option<usize>,
+}
+
+impl Series {
+    fn color(&self, position: usize) -> RGBColor {
+        PALETTE[self.colour.unwrap_or(position) % PALETTE.len()]
+    }
 }
 
 /// One panel of a line chart.
@@ -76,11 +85,8 @@ fn extent(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo, hi)
 }
 
-fn legend(labels: impl Iterator<Item = String>, mark: Mark) -> Vec<LegendEntry> {
-    labels
-        .enumerate()
-        .map(|(i, label)| LegendEntry { label, color: PALETTE[i % PALETTE.len()], mark })
-        .collect()
+fn legend(entries: impl Iterator<Item = (String, RGBColor)>, mark: Mark) -> Vec<LegendEntry> {
+    entries.map(|(label, color)| LegendEntry { label, color, mark }).collect()
 }
 
 fn draw_chart<DB: DrawingBackend>(
@@ -96,7 +102,8 @@ where
     let areas = root.split_evenly((panels.len().max(1), 1));
     for (panel, area) in panels.iter().zip(areas) {
         let (top, plot) = area.split_vertically(LEGEND_HEIGHT);
-        draw_legend(&top, &legend(panel.series.iter().map(|s| s.label.clone()), Mark::Line))?;
+        let entries = panel.series.iter().enumerate().map(|(i, s)| (s.label.clone(), s.color(i)));
+        draw_legend(&top, &legend(entries, Mark::Line))?;
         let pts = || panel.series.iter().flat_map(|s| s.points.iter());
         let band = || panel.series.iter().flat_map(|s| s.band.iter());
         let (x0, x1) = extent(pts().map(|p| p.0));
@@ -128,14 +135,14 @@ where
             if band.len() > 1 {
                 let outline: Vec<(f64, f64)> =
                     band.iter().map(|b| (b.0, b.2)).chain(band.iter().rev().map(|b| (b.0, b.1))).collect();
-                let fill = PALETTE[i % PALETTE.len()].mix(0.2).filled();
+                let fill = s.color(i).mix(0.2).filled();
                 chart.draw_series(std::iter::once(Polygon::new(outline, fill))).map_err(err)?;
             }
         }
         for (i, s) in panel.series.iter().enumerate() {
             let line: Vec<(f64, f64)> =
                 s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite()).collect();
-            let style = PALETTE[i % PALETTE.len()].stroke_width(2);
+            let style = s.color(i).stroke_width(2);
             chart.draw_series(std::iter::once(PathElement::new(line, style))).map_err(err)?;
         }
     }
@@ -181,7 +188,8 @@ where
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
     let (top, rest) = root.split_vertically(LEGEND_HEIGHT);
-    draw_legend(&top, &legend(bars.series.iter().cloned(), Mark::Patch))?;
+    let entries = bars.series.iter().enumerate().map(|(i, l)| (l.clone(), PALETTE[i % PALETTE.len()]));
+    draw_legend(&top, &legend(entries, Mark::Patch))?;
     let n_groups = bars.groups.len().max(1);
     let n_series = bars.series.len().max(1);
     let width = 0.8 / n_series as f64;
