@@ -213,18 +213,8 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("schrl-merge-order-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let record = |task: &str, method: &str, cell: usize| Record {
-            experiment: "fig3".into(),
             cell,
-            id: format!("point-{task}-{method}-0"),
-            robot: "point".into(),
-            task: task.into(),
-            method: method.into(),
-            seed: 0,
-            quick: false,
-            rows: BTreeMap::new(),
-            commands: vec![],
-            commit: "abc".into(),
-            seconds: 1.0,
+            ..crate::report::tests::record("fig3", task, method, 0, &[])
         };
         for r in [record("signal", "htltl", 1), record("signal", "schrl", 0), record("seq", "tltl", 2)] {
             let cell = dir.join("cells").join(&r.id);

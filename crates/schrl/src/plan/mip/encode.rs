@@ -202,14 +202,25 @@ impl Program {
         // The constant is an option only where no operand is always at least as large.
         let constant = (fixed > best_lin_lo).then_some((Expression::from(fixed), fixed, fixed));
         for (e, l, _) in lins.into_iter().chain(constant) {
-            let b = self.vars.add(variable().binary());
-            self.binaries.push(b);
+            let b = self.binary();
             choice += b;
-            // r ≤ e + (hi − l)(1 − b)
-            self.constraints.push((Expression::from(r) + (hi - l) * b).leq(e + (hi - l)));
+            self.at_most_if(r, (e, l), hi, b);
         }
         self.constraints.push(choice.eq(1.0));
         Rob::Lin { e: r.into(), lo, hi }
+    }
+
+    /// A fresh binary.
+    fn binary(&mut self) -> Variable {
+        let b = self.vars.add(variable().binary());
+        self.binaries.push(b);
+        b
+    }
+
+    /// `r ≤ e + (hi − l)(1 − b)`: `r` at most the operand `e` (least value `l`) when `b`
+    /// is set, free below `hi` otherwise.
+    fn at_most_if(&mut self, r: Variable, (e, l): (Expression, f64), hi: f64, b: Variable) {
+        self.constraints.push((Expression::from(r) + (hi - l) * b).leq(e + (hi - l)));
     }
 
     /// The claim that waypoint `t` is in goal disc `disc` (one binary, made once).
@@ -217,38 +228,38 @@ impl Program {
         if let Some(&a) = self.claims.get(&(t, disc)) {
             return a;
         }
-        let a = self.vars.add(variable().binary());
-        self.binaries.push(a);
+        let a = self.binary();
         self.claims.insert((t, disc), a);
         a
     }
 
     /// `max` of operands with binaries of their own and operands gated by claims:
-    /// `r ≤ eᵢ + Mᵢ (1 − bᵢ)` for either kind, `Σ bᵢ + Σ claims ≥ 1`. A claim may be set
-    /// by another `max`, so `r`'s least value is the least of the operands' (it must
-    /// stay feasible under any operand), not the greatest.
-    fn max_claimed(&mut self, own: Vec<Rob>, claimed: Vec<(Rob, Variable)>) -> Rob {
-        if claimed.is_empty() {
-            return self.max(own);
+    /// `r ≤ eᵢ + Mᵢ (1 − bᵢ)` for either kind, `Σ bᵢ + Σ claims ≥ 1` ([`Program::max`]
+    /// when none is claimed). A claim may be set by another `max`, so `r`'s least value
+    /// is the least of the operands' (it must stay feasible under any operand), not the
+    /// greatest.
+    fn max_of(&mut self, options: Vec<Opt>) -> Rob {
+        if options.iter().all(|o| matches!(o, Opt::Own(_))) {
+            let own = options.into_iter().map(|o| match o {
+                Opt::Own(r) | Opt::Claimed(r, _) => r,
+            });
+            return self.max(own.collect());
         }
-        let bounds = own.iter().chain(claimed.iter().map(|(r, _)| r)).map(Rob::bounds);
+        let bounds = options.iter().map(|(Opt::Own(r) | Opt::Claimed(r, _))| r.bounds());
         let (lo, hi) = bounds.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), (a, b)| (l.min(a), h.max(b)));
         let r = self.value(lo, hi);
         let mut chosen = Expression::from(0.0);
-        let gates = own.into_iter().map(|e| (e, None)).chain(claimed.into_iter().map(|(e, a)| (e, Some(a))));
-        for (e, gate) in gates {
-            let b = gate.unwrap_or_else(|| {
-                let b = self.vars.add(variable().binary());
-                self.binaries.push(b);
-                b
-            });
-            chosen += b;
-            let (l, e) = match e {
-                Rob::Const(c) => (c, Expression::from(c)),
-                Rob::Lin { e, lo, .. } => (lo, e),
+        for option in options {
+            let (e, b) = match option {
+                Opt::Own(e) => (e, self.binary()),
+                Opt::Claimed(e, a) => (e, a),
             };
-            // r ≤ e + (hi − l)(1 − b)
-            self.constraints.push((Expression::from(r) + (hi - l) * b).leq(e + (hi - l)));
+            chosen += b;
+            let operand = match e {
+                Rob::Const(c) => (Expression::from(c), c),
+                Rob::Lin { e, lo, .. } => (e, lo),
+            };
+            self.at_most_if(r, operand, hi, b);
         }
         self.constraints.push(chosen.geq(1.0));
         Rob::Lin { e: r.into(), lo, hi }
@@ -504,7 +515,7 @@ impl<'a> Encoder<'a> {
     }
 
     fn atom(&mut self, name: &str, t: usize, sign: f64, offset: f64) -> Result<Rob, MipError> {
-        if sign < 0.0 && t >= 1 && self.discs.iter().any(|d| d.0 == name) {
+        if sign < 0.0 && t >= 1 && self.disc(name).is_some() {
             // Keeping out of a goal disc: its tangents and the claims of the other discs.
             let mut options = vec![];
             self.atom_options(name, t, sign, offset, &mut options)?;
@@ -514,19 +525,17 @@ impl<'a> Encoder<'a> {
         Ok(self.program.shape(&shape))
     }
 
-    /// The `max` of options, own and claimed.
+    /// The `max` of options, own and claimed (`⊥` when there are none).
     fn max_of(&mut self, options: Vec<Opt>) -> Rob {
         if options.is_empty() {
             return Rob::Const(-self.top);
         }
-        let (mut own, mut claimed) = (vec![], vec![]);
-        for o in options {
-            match o {
-                Opt::Own(r) => own.push(r),
-                Opt::Claimed(r, a) => claimed.push((r, a)),
-            }
-        }
-        self.program.max_claimed(own, claimed)
+        self.program.max_of(options)
+    }
+
+    /// The index of `name` among the goal discs claims are kept for.
+    fn disc(&self, name: &str) -> Option<usize> {
+        self.discs.iter().position(|d| d.0 == name)
     }
 
     /// Whether `f` (negated unless `positive`) is a `max` of its operands.
@@ -583,9 +592,7 @@ impl<'a> Encoder<'a> {
         offset: f64,
         out: &mut Vec<Opt>,
     ) -> Result<(), MipError> {
-        let shape = self.atoms.shape(name, t, sign, offset)?;
-        let disc = self.discs.iter().position(|d| d.0 == name).filter(|_| t >= 1);
-        if let Some(k) = disc {
+        if let Some(k) = self.disc(name).filter(|_| t >= 1) {
             if sign > 0.0 {
                 // Reaching disc k: gated by the claim that waypoint t is in it.
                 let a = self.program.claim(t, k);
@@ -609,7 +616,7 @@ impl<'a> Encoder<'a> {
                 return Ok(());
             }
         }
-        match shape {
+        match self.atoms.shape(name, t, sign, offset)? {
             Shape::Max(pieces) => out.extend(pieces.iter().map(|p| Opt::Own(self.program.shape(p)))),
             shape => out.push(Opt::Own(self.program.shape(&shape))),
         }
