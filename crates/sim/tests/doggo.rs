@@ -3,7 +3,7 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sim::mujoco::{CarTwin, Doggo, FALL_HEIGHT, PointTwin, STANDING_HEIGHT};
+use sim::mujoco::{CarTwin, Doggo, FALL_HEIGHT, FALL_TILT_SECONDS, PointTwin, STANDING_HEIGHT};
 use sim::vec_env::member_seed;
 use sim::{Car, Dynamics, Env, GoalEnv, Map, Point, Robot, Step, VecEnv, make_env};
 
@@ -194,22 +194,51 @@ fn teleport(env: &mut GoalEnv<Doggo>, xyz: [f64; 3], quat: [f64; 4]) {
 fn a_fall_is_reported_and_ends_the_episode() {
     let mut env = doggo_on("empty");
     let mut obs = vec![0.0; 58];
+    let upside_down = [0.0, 1.0, 0.0, 0.0];
+    // The low-torso rule: on the floor is a fall at once.
     env.reset_into(1, Some(&[0.0, 0.0]), &mut obs).unwrap();
-    // Upside down (half a turn about x), 0.3 m up.
-    teleport(&mut env, [0.0, 0.0, 0.3], [0.0, 1.0, 0.0, 0.0]);
-    let s = env.step_into(&[0.0; 12], &mut obs).unwrap();
-    assert!(s.fell && s.terminated(), "upside down is a fall");
-    // The low-torso rule on its own.
-    env.reset_into(1, Some(&[0.0, 0.0]), &mut obs).unwrap();
-    let s = env.step_into(&[0.0; 12], &mut obs).unwrap();
-    assert!(!s.fell);
+    assert!(!env.step_into(&[0.0; 12], &mut obs).unwrap().fell);
     teleport(&mut env, [0.0, 0.0, FALL_HEIGHT - 0.03], [1.0, 0.0, 0.0, 0.0]);
     assert!(env.step_into(&[0.0; 12], &mut obs).unwrap().fell, "torso on the floor is a fall");
-    // On its side (a quarter turn about x), lying on the floor.
+    // Dropped upside down from 0.3 m, it lands on its back: a fall.
     env.reset_into(1, Some(&[0.0, 0.0]), &mut obs).unwrap();
-    let h = std::f64::consts::FRAC_1_SQRT_2;
-    teleport(&mut env, [0.0, 0.0, 0.3], [h, h, 0.0, 0.0]);
-    assert!(env.step_into(&[0.0; 12], &mut obs).unwrap().fell, "on its side is a fall");
+    teleport(&mut env, [0.0, 0.0, 0.3], upside_down);
+    let s = (0..10).map(|_| env.step_into(&[0.0; 12], &mut obs).unwrap()).find(|s| s.fell);
+    assert!(s.is_some_and(|s| s.terminated()), "on its back within a second is a fall");
+}
+
+/// Holds the Doggo upside down 0.3 m up, at rest, for one control step (0.1 s: it
+/// drops 5 cm, nowhere near the floor).
+fn held_over(env: &mut GoalEnv<Doggo>, obs: &mut [f64]) -> bool {
+    teleport(env, [0.0, 0.0, 0.3], [0.0, 1.0, 0.0, 0.0]);
+    let mut s: serde_json::Value = serde_json::from_str(&env.save_state()).unwrap();
+    for v in s["robot"]["qvel"].as_array_mut().unwrap() {
+        *v = serde_json::json!(0.0);
+    }
+    env.restore_state(&s.to_string()).unwrap();
+    env.step_into(&[0.0; 12], obs).unwrap().fell
+}
+
+#[test]
+fn a_tilt_is_a_fall_only_once_it_has_lasted_fall_tilt_seconds() {
+    let mut env = doggo_on("empty");
+    let mut obs = vec![0.0; 58];
+    let over = (FALL_TILT_SECONDS / 0.1).round() as usize;
+    env.reset_into(1, Some(&[0.0, 0.0]), &mut obs).unwrap();
+    // Over, but righted before the time is up: the clock starts again.
+    for step in 1..over {
+        assert!(!held_over(&mut env, &mut obs), "{step} control steps over is not a fall");
+    }
+    teleport(&mut env, [0.0, 0.0, 0.22], [1.0, 0.0, 0.0, 0.0]);
+    assert!(!env.step_into(&[0.0; 12], &mut obs).unwrap().fell, "righted");
+    for step in 1..over {
+        assert!(!held_over(&mut env, &mut obs), "{step} control steps over again is not a fall");
+    }
+    // The tilt's clock is part of the saved state.
+    let saved = env.save_state();
+    assert!(held_over(&mut env, &mut obs), "over for {FALL_TILT_SECONDS} s is a fall");
+    env.restore_state(&saved).unwrap();
+    assert!(held_over(&mut env, &mut obs), "restored, the tilt's clock goes on");
 }
 
 #[test]

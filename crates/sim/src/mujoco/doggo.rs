@@ -25,7 +25,8 @@
 //! hip z, hip y, ankle.
 //!
 //! A fall — the torso's centre below [`FALL_HEIGHT`], or the front torso tilted past 60°
-//! ([`FALL_TILT_COS`]: on its side or upside down) — is reported by [`crate::Step::fell`] and ends the episode like a collision.
+//! ([`FALL_TILT_COS`]) for [`FALL_TILT_SECONDS`] without a break: on its side or upside
+//! down — is reported by [`crate::Step::fell`] and ends the episode like a collision.
 
 use std::sync::{Arc, OnceLock};
 
@@ -45,9 +46,15 @@ pub const DOGGO_XML: &str = include_str!("../../assets/doggo.xml");
 /// [`STANDING_HEIGHT`], lying on its belly at the torso's radius, 0.075 m.
 pub const FALL_HEIGHT: f64 = 0.08;
 
-/// A torso tilted further than 60° from upright (on its side, or upside down) has
-/// fallen: the cosine of that angle, compared with the up axis's vertical part.
+/// A torso tilted further than 60° from upright for [`FALL_TILT_SECONDS`] (on its side,
+/// or upside down) has fallen: the cosine of that angle, compared with the up axis's
+/// vertical part.
 pub const FALL_TILT_COS: f64 = 0.5;
+
+/// Seconds of simulated time a tilt past 60° must last to be a fall: a walking Doggo
+/// rears past 60° and rights itself, a fallen one stays down. Twice the longest righting
+/// measured (README's Doggo section).
+pub const FALL_TILT_SECONDS: f64 = 2.0;
 
 const NAME: &str = "doggo";
 const SUBSTEPS: usize = 10;
@@ -154,6 +161,8 @@ pub struct Doggo {
     data: MjData<Arc<MjModel>>,
     pos: [f64; 2],
     fallen: bool,
+    /// Simulated time at which the current tilt past 60° began (none: upright).
+    tilted_since: Option<f64>,
 }
 
 impl Doggo {
@@ -161,7 +170,8 @@ impl Doggo {
     pub fn new(map: &Map) -> Result<Self, EnvError> {
         let compiled = compiled(map)?;
         let data = MjData::new(compiled.model.clone());
-        let mut dog = Self { compiled, map: map.name(), data, pos: [0.0; 2], fallen: false };
+        let mut dog =
+            Self { compiled, map: map.name(), data, pos: [0.0; 2], fallen: false, tilted_since: None };
         dog.place([0.0, 0.0], 0.0);
         Ok(dog)
     }
@@ -216,6 +226,7 @@ impl Doggo {
         self.data.forward();
         self.pos = xy;
         self.fallen = false;
+        self.tilted_since = None;
     }
 
     fn touches_wall(&self) -> bool {
@@ -238,6 +249,7 @@ impl Doggo {
             qacc_warmstart: self.data.qacc_warmstart().to_vec(),
             sensordata: self.data.sensordata().to_vec(),
             fallen: self.fallen,
+            tilted_since: self.tilted_since,
         }
     }
 
@@ -261,6 +273,7 @@ impl Doggo {
         self.data.sensordata_mut().copy_from_slice(&s.sensordata);
         self.pos = [s.qpos[0], s.qpos[1]];
         self.fallen = s.fallen;
+        self.tilted_since = s.tilted_since;
         Ok(())
     }
 }
@@ -277,6 +290,9 @@ struct DoggoState {
     qacc_warmstart: Vec<f64>,
     sensordata: Vec<f64>,
     fallen: bool,
+    /// Absent in states saved before tilts were timed: upright.
+    #[serde(default)]
+    tilted_since: Option<f64>,
 }
 
 impl Serialize for Doggo {
@@ -315,11 +331,20 @@ impl Dynamics for Doggo {
         self.data.ctrl_mut().copy_from_slice(action);
         let mut collided = false;
         for _ in 0..SUBSTEPS {
+            let before = self.data.time();
             self.data.step();
             collided |= self.touches_wall();
-            // Checked every physics step, so that a fall is seen even if the robot
-            // bounces back within the control step.
-            self.fallen |= self.torso_position()[2] < FALL_HEIGHT || self.up_axis()[2] < FALL_TILT_COS;
+            // Checked every physics step: a torso on the floor is a fall even if it
+            // bounces back within the control step, and a tilt is timed to the step.
+            let now = self.data.time();
+            self.tilted_since = match self.tilted_since {
+                _ if self.up_axis()[2] >= FALL_TILT_COS => None,
+                // The tilt began within this physics step: timed from its start.
+                None => Some(before),
+                since => since,
+            };
+            let held = self.tilted_since.is_some_and(|t| now - t >= FALL_TILT_SECONDS - 1e-9);
+            self.fallen |= self.torso_position()[2] < FALL_HEIGHT || held;
         }
         let [x, y, _] = self.torso_position();
         self.pos = [x, y];
