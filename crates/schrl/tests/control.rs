@@ -226,6 +226,11 @@ fn bad_configurations_name_the_field() {
         c.near_goals = Some(bad);
         assert!(ControlTrainer::new(c).err().unwrap().to_string().contains("near_goals"), "{bad:?}");
     }
+    for bad in [-1.0, f64::NAN] {
+        let mut c = tiny_config(Robot::Point, 0, 1000);
+        c.fall_penalty = bad;
+        assert!(ControlTrainer::new(c).err().unwrap().to_string().contains("fall_penalty"), "{bad}");
+    }
 }
 
 /// An option (paper App. K) chases its one goal: every reach ends the episode, and

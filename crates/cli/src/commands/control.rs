@@ -54,6 +54,10 @@ pub struct TrainArgs {
     /// Radius of the ball around the robot a near goal is drawn in (m) [default: 1].
     #[arg(long, value_name = "METRES")]
     near_goals_within: Option<f64>,
+    /// Reward subtracted on the step the robot falls (Doggo) [default: 0, the paper's
+    /// reward].
+    #[arg(long, value_name = "REWARD")]
+    fall_penalty: Option<f64>,
     #[command(flatten)]
     run: super::RunDirArgs,
     /// Save a checkpoint every this many updates (and at the end).
@@ -134,6 +138,7 @@ impl TrainArgs {
         }
         config.goal = self.goal.clone();
         config.near_goals = self.near_goals(config.near_goals);
+        config.fall_penalty = self.fall_penalty.unwrap_or(config.fall_penalty);
         Ok(config)
     }
 
@@ -168,6 +173,7 @@ impl TrainArgs {
                     (self.near_goals.is_some() || self.near_goals_within.is_some())
                         && self.near_goals(saved.near_goals) != saved.near_goals,
                 ),
+                ("--fall-penalty", differs(&self.fall_penalty, &saved.fall_penalty)),
             ],
         )?;
         Ok(ControlConfig { total_steps: self.steps.unwrap_or(saved.total_steps), ..saved.clone() })

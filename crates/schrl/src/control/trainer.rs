@@ -48,6 +48,14 @@ pub struct ControlConfig {
     /// default: every goal anywhere).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub near_goals: Option<NearGoals>,
+    /// Subtracted from the reward of the step a robot falls (before reward scaling;
+    /// 0, the default: the paper's reward, where a fall costs only the return it ends).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub fall_penalty: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// A share of a goal-conditioned controller's random goals drawn near the robot.
@@ -88,6 +96,7 @@ impl ControlConfig {
             ppo: PpoConfig::reference(),
             goal: None,
             near_goals: None,
+            fall_penalty: 0.0,
         }
     }
 }
@@ -217,6 +226,12 @@ impl ControlTrainer {
         {
             return Err(ControlError::Config(format!(
                 "near_goals: fraction must be in [0, 1] and within a positive number of metres, got {n:?}"
+            )));
+        }
+        if !(config.fall_penalty >= 0.0 && config.fall_penalty.is_finite()) {
+            return Err(ControlError::Config(format!(
+                "fall_penalty must be a finite number ≥ 0, got {}",
+                config.fall_penalty
             )));
         }
         if let Some(g) = &config.goal {
@@ -365,7 +380,7 @@ impl ControlTrainer {
             for (i, (env, o)) in self.envs.envs_mut().iter_mut().zip(self.raw_obs.chunks_mut(od)).enumerate()
             {
                 let s = reports[i];
-                rewards[i] = s.reward;
+                rewards[i] = s.reward - if s.fell { self.config.fall_penalty } else { 0.0 };
                 self.episode_returns[i] += s.reward;
                 if s.reached {
                     reached += 1;
