@@ -224,11 +224,26 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
             }
             None => most.root.clone(),
         };
-        let (status, (_, choices, best)) = match most.solve(cfg, left(t0), root, true) {
+        let (status, (first, choices, best)) = match most.solve(cfg, left(t0), root, true) {
             Err(e) if timed_out(&e) && last.is_some() => return Ok(out_of_time(last, t0)),
             other => other?,
         };
         if without_tangents && cfg.robustness_cap.is_some_and(|cap| best < cap - 1e-6) {
+            // Short of the cap by the claims alone: its plan (not shortened) stands if
+            // the program with tangents runs out of time.
+            let mut path = start.to_vec();
+            path.extend(first);
+            let robustness = task.spec().robustness(&path, &hard)?;
+            last = Some(MipPlan {
+                path,
+                robustness,
+                program_robustness: robustness.min(best),
+                optimal: false,
+                seconds: t0.elapsed().as_secs_f64(),
+                binaries,
+                constraints,
+                rounds: round,
+            });
             tangents = true;
             continue;
         }
