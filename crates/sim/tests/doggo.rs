@@ -207,6 +207,25 @@ fn a_fall_is_reported_and_ends_the_episode() {
     assert!(s.is_some_and(|s| s.terminated()), "on its back within a second is a fall");
 }
 
+#[test]
+fn a_diverged_physics_step_ends_the_episode_where_the_robot_was() {
+    let mut env = doggo_on("empty");
+    let mut obs = vec![0.0; 58];
+    env.reset_into(1, Some(&[1.0, -1.0]), &mut obs).unwrap();
+    env.step_into(&[0.0; 12], &mut obs).unwrap();
+    let at = env.position().to_vec();
+    // A velocity past MuJoCo's bound: it warns and resets the data to the model's start.
+    let mut s: serde_json::Value = serde_json::from_str(&env.save_state()).unwrap();
+    s["robot"]["qvel"][0] = serde_json::json!(1e12);
+    env.restore_state(&s.to_string()).unwrap();
+    let step = env.step_into(&[0.0; 12], &mut obs).unwrap();
+    assert!(step.fell && step.terminated());
+    assert_eq!(env.position(), &at[..], "not teleported to the model's start");
+    // A reset clears it.
+    env.reset_into(2, Some(&[1.0, -1.0]), &mut obs).unwrap();
+    assert!(!env.step_into(&[0.0; 12], &mut obs).unwrap().fell);
+}
+
 /// Holds the Doggo upside down 0.3 m up, at rest, for one control step (0.1 s: it
 /// drops 5 cm, nowhere near the floor).
 fn held_over(env: &mut GoalEnv<Doggo>, obs: &mut [f64]) -> bool {

@@ -26,7 +26,9 @@
 //!
 //! A fall — the torso's centre below [`FALL_HEIGHT`], or the front torso tilted past 60°
 //! ([`FALL_TILT_COS`]) for [`FALL_TILT_SECONDS`] without a break: on its side or upside
-//! down — is reported by [`crate::Step::fell`] and ends the episode like a collision.
+//! down — is reported by [`crate::Step::fell`] and ends the episode like a collision. So
+//! is a diverged physics step (MuJoCo resets the data to the model's start on one; about
+//! once in 6 M steps of training), which leaves the robot where it was last seen.
 
 use std::sync::{Arc, OnceLock};
 
@@ -212,6 +214,14 @@ impl Doggo {
         &self.compiled.model
     }
 
+    /// `true` if MuJoCo found a position, velocity or acceleration out of bounds (a
+    /// diverged solve) since the last reset, and so reset the data to the model's start.
+    fn diverged(&self) -> bool {
+        use mujoco_rs::mujoco_c::mjtWarning::{mjWARN_BADQACC, mjWARN_BADQPOS, mjWARN_BADQVEL};
+        let w = self.data.warning();
+        [mjWARN_BADQPOS, mjWARN_BADQVEL, mjWARN_BADQACC].iter().any(|&k| w[k as usize].number > 0)
+    }
+
     /// `true` once the robot has fallen (torso too low, on its side or upside down).
     pub fn has_fallen(&self) -> bool {
         self.fallen
@@ -333,6 +343,12 @@ impl Dynamics for Doggo {
         for _ in 0..SUBSTEPS {
             let before = self.data.time();
             self.data.step();
+            if self.diverged() {
+                // MuJoCo has put the robot back at the model's start: the episode ends
+                // here, the robot where it was last seen.
+                self.fallen = true;
+                return collided;
+            }
             collided |= self.touches_wall();
             // Checked every physics step: a torso on the floor is a fall even if it
             // bounces back within the control step, and a tilt is timed to the step.
