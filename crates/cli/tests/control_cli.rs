@@ -30,6 +30,10 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
         out,
         "--eval-episodes",
         "20",
+        "--hidden",
+        "16,8",
+        "--fall-penalty",
+        "5",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stdout(&o).contains("success rate: "), "{}", stdout(&o));
@@ -39,6 +43,8 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
     let manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap();
     assert_eq!(manifest["kind"], "controller");
+    assert_eq!(manifest["settings"]["ppo"]["hidden"], serde_json::json!([16, 8]));
+    assert_eq!(manifest["settings"]["fall_penalty"], 5.0);
     for f in ["controller.safetensors", "controller.json"] {
         assert!(manifest["files"][f]["sha256"].is_string(), "{f} not in the manifest");
     }
@@ -60,6 +66,10 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
 
     let o = schrl(&["control", "train", "--resume", "--robot", "car", "--out", out]);
     assert!(!o.status.success() && stderr(&o).contains("--robot differs"), "{}", stderr(&o));
+    for (flag, value) in [("--hidden", "64,64"), ("--fall-penalty", "0")] {
+        let o = schrl(&["control", "train", "--resume", flag, value, "--out", out]);
+        assert!(!o.status.success() && stderr(&o).contains(&format!("{flag} differs")), "{}", stderr(&o));
+    }
 
     let png = dir.join("episodes.png");
     let o = schrl(&["control", "eval", "--ckpt", out, "--episodes", "30", "--out", png.to_str().unwrap()]);

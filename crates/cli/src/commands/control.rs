@@ -42,6 +42,10 @@ pub struct TrainArgs {
     /// Environments stepped together.
     #[arg(long, value_parser = super::count::<1, 4096>)]
     num_envs: Option<usize>,
+    /// Hidden layer widths of the policy and value networks, e.g. `256,256` [default:
+    /// the preset's, 64,64].
+    #[arg(long, value_delimiter = ',', value_parser = super::count::<1, 4096>)]
+    hidden: Option<Vec<usize>>,
     /// Train an option for this one goal (`X,Y` or `X,Y,Z`) instead of a goal-conditioned
     /// controller: every episode chases it and ends on reaching it (paper App. K). The
     /// evaluation after training still draws random goals.
@@ -121,6 +125,9 @@ impl TrainArgs {
             ppo.num_envs = n;
             ppo.rollout = ppo.rollout.div_ceil(n) * n;
         }
+        if let Some(h) = &self.hidden {
+            ppo.hidden = h.clone();
+        }
         Ok(ppo)
     }
 
@@ -167,6 +174,7 @@ impl TrainArgs {
                 ("--seed", differs(&self.seed, &saved.seed)),
                 ("--preset", preset_differs),
                 ("--num-envs", differs(&self.num_envs, &saved.ppo.num_envs)),
+                ("--hidden", differs(&self.hidden, &saved.ppo.hidden)),
                 ("--goal", self.goal.is_some() && self.goal != saved.goal),
                 (
                     "--near-goals",
