@@ -27,8 +27,8 @@
 //! A fall — the torso's centre below [`FALL_HEIGHT`], or the front torso tilted past 60°
 //! ([`FALL_TILT_COS`]) for [`FALL_TILT_SECONDS`] without a break: on its side or upside
 //! down — is reported by [`crate::Step::fell`] and ends the episode like a collision. So
-//! is a diverged physics step (MuJoCo resets the data to the model's start on one; about
-//! once in 6 M steps of training), which leaves the robot where it was last seen.
+//! is a diverged physics step (on one, MuJoCo resets the data to the model's start), which
+//! leaves the robot where it was last seen.
 
 use std::sync::{Arc, OnceLock};
 
