@@ -48,8 +48,9 @@ pub struct ControlConfig {
     /// default: every goal anywhere).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub near_goals: Option<NearGoals>,
-    /// Subtracted from the reward of the step a robot falls (before reward scaling;
-    /// 0, the default: the paper's reward, where a fall costs only the return it ends).
+    /// Subtracted from the reward PPO learns from on the step a robot falls (before
+    /// reward scaling; the logged returns stay the environment's). 0, the default: the
+    /// paper's reward, where a fall costs only the return it ends.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub fall_penalty: f64,
 }
