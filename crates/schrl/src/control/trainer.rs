@@ -50,7 +50,8 @@ pub struct ControlConfig {
     pub near_goals: Option<NearGoals>,
     /// Subtracted from the reward PPO learns from on the step a robot falls (before
     /// reward scaling; the logged returns stay the environment's). 0, the default: the
-    /// paper's reward, where a fall costs only the return it ends.
+    /// paper's reward, where a fall costs only the return it ends. Controller training
+    /// only: the joint phase's controller updates learn from the environment's reward.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub fall_penalty: f64,
 }
