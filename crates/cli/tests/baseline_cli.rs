@@ -11,11 +11,11 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-/// A fresh directory with the easy task's two files.
-fn workspace(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("schrl-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+/// A fresh scratch directory with the easy task's two files; the directory is removed
+/// when its guard (the first half) is dropped.
+fn workspace() -> (tempfile::TempDir, PathBuf) {
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().to_path_buf();
     std::fs::write(
         dir.join("easy.toml"),
         "name = \"easy\"\nrobot = \"point\"\nmap = \"empty\"\nspec = \"easy.stl\"\nsteps = 2\n\
@@ -24,7 +24,7 @@ fn workspace(name: &str) -> PathBuf {
     )
     .unwrap();
     std::fs::write(dir.join("easy.stl"), "F[1,2] g & G[1,2] safe\n").unwrap();
-    dir
+    (scratch, dir)
 }
 
 fn updates(run: &Path) -> Vec<u64> {
@@ -37,7 +37,7 @@ fn updates(run: &Path) -> Vec<u64> {
 
 #[test]
 fn tltl_trains_resumes_refuses_to_clobber_evaluates_and_plots() {
-    let dir = workspace("baseline-cli");
+    let (_scratch, dir) = workspace();
     let task = dir.join("easy.toml");
     let run = dir.join("run");
     let (task, out) = (task.to_str().unwrap(), run.to_str().unwrap());
@@ -80,21 +80,19 @@ fn tltl_trains_resumes_refuses_to_clobber_evaluates_and_plots() {
     assert!(std::fs::metadata(&png).unwrap().len() > 1000);
     let o = schrl(&["plot", "curves", "--run", out, "--out", png.to_str().unwrap(), "--force"]);
     assert!(!o.status.success() && text(&o.stderr).contains("TASK:METHOD:DIR"), "{}", text(&o.stderr));
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn baseline_eval_names_a_directory_that_is_not_a_run() {
-    let dir = workspace("baseline-eval-missing");
+    let (_scratch, dir) = workspace();
     let o = schrl(&["baseline", "eval", "--ckpt", dir.join("nothing").to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(text(&o.stderr).contains("nothing"), "{}", text(&o.stderr));
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn crm_trains_with_a_machine_file_resumes_and_evaluates() {
-    let dir = workspace("crm-cli");
+    let (_scratch, dir) = workspace();
     let machine = dir.join("easy.rm.toml");
     std::fs::write(&machine, "initial = \"u0\"\nterminal = [\"done\"]\n[[edge]]\nfrom = \"u0\"\nto = \"done\"\non = \"g\"\nreward = 1.0\n")
         .unwrap();
@@ -159,5 +157,4 @@ fn crm_trains_with_a_machine_file_resumes_and_evaluates() {
     assert!(o.status.success() && text(&o.stdout).contains("trained dhrm"), "{}", text(&o.stderr));
     let o = schrl(&["baseline", "eval", "--ckpt", dhrm, "--groups", "1", "--per-group", "10"]);
     assert!(o.status.success() && text(&o.stdout).contains("satisfaction: "), "{}", text(&o.stderr));
-    std::fs::remove_dir_all(&dir).unwrap();
 }

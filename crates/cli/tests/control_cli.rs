@@ -16,8 +16,8 @@ fn stderr(o: &std::process::Output) -> String {
 
 #[test]
 fn trains_resumes_refuses_to_clobber_and_evaluates() {
-    let dir = std::env::temp_dir().join(format!("schrl-control-cli-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().join("control-cli");
     let out = dir.to_str().unwrap();
     let o = schrl(&[
         "control",
@@ -78,7 +78,6 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
     let rate: f64 = line["success rate: ".len()..].parse().unwrap();
     assert!((0.0..=1.0).contains(&rate));
     assert!(std::fs::metadata(&png).unwrap().len() > 1000);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -98,21 +97,20 @@ fn task_check_accepts_shipped_tasks_and_names_the_problem_in_bad_ones() {
     let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../../tasks");
     let o = schrl(&["task", "check", &format!("{root}/drone/loop.toml")]);
     assert!(o.status.success() && stdout(&o).ends_with("ok\n"), "{}", stderr(&o));
-    let dir = std::env::temp_dir().join(format!("schrl-task-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path();
     let toml_text = std::fs::read_to_string(format!("{root}/point/seq.toml")).unwrap();
     std::fs::write(dir.join("seq.toml"), toml_text).unwrap();
     std::fs::write(dir.join("seq.stl"), "F[1,2] g0 & F[3,4] g9").unwrap();
     let o = schrl(&["task", "check", dir.join("seq.toml").to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("seq.stl: line 1, column 20: 'g9' is not defined"), "{}", stderr(&o));
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn joint_train_resume_and_eval_end_to_end() {
-    let dir = std::env::temp_dir().join(format!("schrl-joint-cli-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().join("joint-cli");
     let ctl = dir.join("ctl");
     let o = schrl(&[
         "control",
@@ -338,7 +336,6 @@ fn joint_train_resume_and_eval_end_to_end() {
         "{}",
         stderr(&o)
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Copies a run directory (files and one level of subdirectories).
@@ -357,9 +354,8 @@ fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
 
 #[test]
 fn plot_bars_draws_results_and_names_bad_rows() {
-    let dir = std::env::temp_dir().join(format!("schrl-bars-cli-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path();
     let csv = dir.join("fig4.csv");
     std::fs::write(
         &csv,
@@ -384,5 +380,4 @@ fn plot_bars_draws_results_and_names_bad_rows() {
     std::fs::write(&csv, "task,satisfaction\n").unwrap();
     let o = plot(other.to_str().unwrap());
     assert!(stderr(&o).contains("the header must be"), "{}", stderr(&o));
-    std::fs::remove_dir_all(&dir).unwrap();
 }

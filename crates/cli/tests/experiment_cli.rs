@@ -24,11 +24,11 @@ fn ok(o: &Output) -> String {
     text(&o.stdout)
 }
 
-fn fresh(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("schrl-exp-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// An empty scratch directory, removed when its guard (the first half) is dropped.
+fn fresh() -> (tempfile::TempDir, PathBuf) {
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().to_path_buf();
+    (scratch, dir)
 }
 
 fn results(dir: &Path) -> Vec<serde_json::Value> {
@@ -55,7 +55,10 @@ fn quick(e: &str, out: &Path) -> Output {
 fn quick_runs() -> &'static PathBuf {
     static RUNS: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     RUNS.get_or_init(|| {
-        let root = fresh("quick");
+        // Shared by the tests of this process, so no guard can remove it when they
+        // end: under cargo's scratch space for integration tests (target/tmp), afresh.
+        let root = Path::new(env!("CARGO_TARGET_TMPDIR")).join("experiment-quick-runs");
+        let _ = std::fs::remove_dir_all(&root);
         for e in ["controllers", "table2", "table3-4", "table5", "table6", "table7", "fig3", "fig4", "fig6"] {
             ok(&quick(e, &root.join(e)));
         }
@@ -121,7 +124,7 @@ fn every_experiment_runs_end_to_end_at_quick_size() {
 #[cfg(feature = "mujoco")]
 #[test]
 fn table1_runs_doggo_at_quick_size() {
-    let out = fresh("table1");
+    let (_scratch_out, out) = fresh();
     ok(&quick("table1", &out));
     let r = &results(&out)[0];
     assert_eq!(r["robot"], "doggo");
@@ -151,7 +154,7 @@ fn finished_cells_are_skipped_and_another_budget_is_refused() {
 
 #[test]
 fn bad_selections_say_what_is_wrong() {
-    let out = fresh("bad");
+    let (_scratch_out, out) = fresh();
     let o = out.to_str().unwrap();
     let cases: [(&[&str], &str); 5] = [
         (
@@ -185,7 +188,7 @@ fn bad_selections_say_what_is_wrong() {
 
 #[test]
 fn array_tasks_from_the_deploy_files_run_their_own_cell_and_merge() {
-    let out = fresh("array");
+    let (_scratch_out, out) = fresh();
     let o = out.to_str().unwrap();
     let sel = ["--quick", "--seeds", "0-1", "--tasks", "seq"];
     let list = ok(&schrl(&[&["experiment", "fig6", "--list"][..], &sel].concat()));
@@ -257,7 +260,7 @@ fn chromium() -> Option<String> {
 #[test]
 fn the_report_has_every_table_and_its_page_renders_tables_and_pictures() {
     let root = quick_runs();
-    let report = fresh("report");
+    let (_scratch_report, report) = fresh();
     let dirs: Vec<String> =
         ["table2", "table3-4", "fig3", "fig4"].iter().map(|e| root.join(e).display().to_string()).collect();
     let out = report.join("site");

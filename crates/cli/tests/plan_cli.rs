@@ -16,8 +16,8 @@ fn last_value(out: &std::process::Output, key: &str) -> f64 {
 
 #[test]
 fn trains_saves_refuses_to_clobber_and_samples() {
-    let dir = std::env::temp_dir().join(format!("schrl-plan-cli-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().join("plan-cli");
     let out = dir.to_str().unwrap();
     let o = schrl(&["plan", "train", "--task", "seq", "--seed", "0", "--updates", "400", "--out", out]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -58,8 +58,8 @@ fn bad_arguments_are_clear_errors() {
 
 #[test]
 fn an_ablation_planner_round_trips_through_its_checkpoint() {
-    let dir = std::env::temp_dir().join(format!("schrl-plan-mlp-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().join("plan-mlp");
     let out = dir.to_str().unwrap();
     let o = schrl(&[
         "plan",
@@ -90,8 +90,8 @@ fn an_ablation_planner_round_trips_through_its_checkpoint() {
 
 #[test]
 fn time_compares_the_network_with_the_gradient_planner() {
-    let dir = std::env::temp_dir().join(format!("schrl-plan-time-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().join("plan-time");
     let out = dir.to_str().unwrap();
     let o = schrl(&["plan", "train", "--task", "branch", "--updates", "20", "--out", out]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -109,9 +109,8 @@ fn time_compares_the_network_with_the_gradient_planner() {
 
 #[test]
 fn mip_plans_write_a_file_say_their_robustness_and_refuse_bad_input() {
-    let dir = std::env::temp_dir().join(format!("schrl-plan-mip-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path();
     let plan = dir.join("plan.json");
     let p = plan.to_str().unwrap();
     let o = schrl(&["plan", "mip", "--task", "branch", "--start", "1.5,-1.5", "--out", p]);

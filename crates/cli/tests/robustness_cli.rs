@@ -7,10 +7,9 @@ fn schrl(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_schrl")).args(args).output().expect("runs")
 }
 
-fn write(name: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("schrl-cli-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join(name);
+/// Writes `text` to `dir/name` (each test's own scratch directory, removed when it ends).
+fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> PathBuf {
+    let p = dir.path().join(name);
     std::fs::write(&p, text).unwrap();
     p
 }
@@ -21,12 +20,13 @@ fn last_line(o: &Output) -> String {
 
 #[test]
 fn prints_robustness_as_the_last_line() {
-    let trace = write("ok.csv", "x,y\n0,0\n1,0.5\n2,1\n");
+    let dir = tempfile::tempdir().unwrap();
+    let trace = write(&dir, "ok.csv", "x,y\n0,0\n1,0.5\n2,1\n");
     let t = trace.to_str().unwrap();
     let o = schrl(&["robustness", "--spec", "F[1,2] x > 1.5 & G y >= -1", "--trace", t]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(last_line(&o), "0.5");
-    let spec = write("spec.stl", "# reach x > 1.5\nF x > 1.5\n");
+    let spec = write(&dir, "spec.stl", "# reach x > 1.5\nF x > 1.5\n");
     let at = format!("@{}", spec.display());
     let o = schrl(&["robustness", "--spec", &at, "--trace", t, "--semantics", "lse:0.01"]);
     let v: f64 = last_line(&o).parse().unwrap();
@@ -38,7 +38,8 @@ fn prints_robustness_as_the_last_line() {
 
 #[test]
 fn writes_the_gradient() {
-    let trace = write("g.csv", "x,y\n0,0\n3,0\n1,0\n");
+    let dir = tempfile::tempdir().unwrap();
+    let trace = write(&dir, "g.csv", "x,y\n0,0\n3,0\n1,0\n");
     let grad = trace.with_file_name("grad.csv");
     let o = schrl(&[
         "robustness",
@@ -63,7 +64,8 @@ fn fails_with(args: &[&str], needle: &str) {
 
 #[test]
 fn bad_input_is_a_clear_error() {
-    let ok = write("ok2.csv", "x,y\n0,0\n1,1\n");
+    let dir = tempfile::tempdir().unwrap();
+    let ok = write(&dir, "ok2.csv", "x,y\n0,0\n1,1\n");
     let ok = ok.to_str().unwrap();
     fails_with(
         &["robustness", "--spec", "F[1,2] (x > 1 &", "--trace", ok],
@@ -78,19 +80,19 @@ fn bad_input_is_a_clear_error() {
         &["robustness", "--spec", "F x > 1", "--trace", ok, "--semantics", "fuzzy"],
         "unknown semantics",
     );
-    let ragged = write("ragged.csv", "x,y\n1,2\n3\n");
+    let ragged = write(&dir, "ragged.csv", "x,y\n1,2\n3\n");
     fails_with(
         &["robustness", "--spec", "F x > 1", "--trace", ragged.to_str().unwrap()],
         "line 3: 1 fields, but the header has 2",
     );
-    let nonnum = write("nonnum.csv", "x,y\n1,2\n3,abc\n");
+    let nonnum = write(&dir, "nonnum.csv", "x,y\n1,2\n3,abc\n");
     fails_with(
         &["robustness", "--spec", "F x > 1", "--trace", nonnum.to_str().unwrap()],
         "line 3, column 'y': 'abc' is not a finite number",
     );
-    let empty = write("empty.csv", "x,y\n");
+    let empty = write(&dir, "empty.csv", "x,y\n");
     fails_with(&["robustness", "--spec", "F x > 1", "--trace", empty.to_str().unwrap()], "no rows");
-    let badname = write("badname.csv", "x,my y\n1,2\n");
+    let badname = write(&dir, "badname.csv", "x,my y\n1,2\n");
     fails_with(
         &["robustness", "--spec", "F x > 1", "--trace", badname.to_str().unwrap()],
         "not a valid signal name",
@@ -101,7 +103,8 @@ fn bad_input_is_a_clear_error() {
 
 #[test]
 fn inputs_without_end_starts_past_the_end_and_overwriting_the_input_are_refused() {
-    let ok = write("ok3.csv", "x,y\n0,0\n1,1\n");
+    let dir = tempfile::tempdir().unwrap();
+    let ok = write(&dir, "ok3.csv", "x,y\n0,0\n1,1\n");
     let ok = ok.to_str().unwrap();
     // Regression: these read until memory ran out.
     fails_with(&["robustness", "--spec", "@/dev/zero", "--trace", ok], "larger than 1024 KiB");
@@ -115,7 +118,7 @@ fn inputs_without_end_starts_past_the_end_and_overwriting_the_input_are_refused(
     // Regression: --gradient onto the trace overwrote the input.
     fails_with(&["robustness", "--spec", "F x > 0", "--trace", ok, "--gradient", ok], "is the trace itself");
     assert_eq!(std::fs::read_to_string(ok).unwrap(), "x,y\n0,0\n1,1\n");
-    let grad = write("kept.csv", "precious");
+    let grad = write(&dir, "kept.csv", "precious");
     let g = grad.to_str().unwrap();
     fails_with(&["robustness", "--spec", "F x > 0", "--trace", ok, "--gradient", g], "--force");
     assert_eq!(std::fs::read_to_string(&grad).unwrap(), "precious");
@@ -128,7 +131,7 @@ fn inputs_without_end_starts_past_the_end_and_overwriting_the_input_are_refused(
     assert_eq!(last_line(&schrl(&["robustness", "--spec", "true", "--trace", ok])), "inf");
     assert_eq!(last_line(&schrl(&["robustness", "--spec", "false | x > 5", "--trace", ok])), "-5");
     // Until: standard by default (φ from t), the paper's reading (φ from t+a) on request.
-    let tr = write("until.csv", "x\n-1\n2\n3\n7\n");
+    let tr = write(&dir, "until.csv", "x\n-1\n2\n3\n7\n");
     let until = |rule: &str| {
         last_line(&schrl(&[
             "robustness",
@@ -142,7 +145,7 @@ fn inputs_without_end_starts_past_the_end_and_overwriting_the_input_are_refused(
     };
     assert_eq!((until("standard"), until("paper")), ("-1".to_string(), "2".to_string()));
     // A byte-order mark before the spec is not a syntax error.
-    let bom = write("bom.stl", "\u{feff}F x > 0\n");
+    let bom = write(&dir, "bom.stl", "\u{feff}F x > 0\n");
     let spec = format!("@{}", bom.display());
     assert_eq!(last_line(&schrl(&["robustness", "--spec", &spec, "--trace", ok])), "1");
 }
@@ -150,7 +153,8 @@ fn inputs_without_end_starts_past_the_end_and_overwriting_the_input_are_refused(
 /// The smooth `until` relaxations are chosen in the semantics text; hard has none.
 #[test]
 fn until_relaxation_is_named_and_hard_refuses_one() {
-    let trace = write("u.csv", "x,y\n1,0\n1,0\n1,2\n");
+    let dir = tempfile::tempdir().unwrap();
+    let trace = write(&dir, "u.csv", "x,y\n1,0\n1,0\n1,2\n");
     let t = trace.to_str().unwrap();
     let value = |sem: &str| -> f64 {
         let o = schrl(&["robustness", "--spec", "x > 0 U y > 1", "--trace", t, "--semantics", sem]);

@@ -27,10 +27,9 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-fn temp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("schrl-run-dirs-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
+/// `dir/name` in a test's own scratch directory (removed when the test ends).
+fn temp(dir: &tempfile::TempDir, name: &str) -> PathBuf {
+    dir.path().join(name)
 }
 
 fn manifest(dir: &Path) -> serde_json::Value {
@@ -139,7 +138,8 @@ fn control_args(out: &str) -> Vec<&str> {
 
 #[test]
 fn control_train_killed_at_random_moments_resumes_bit_for_bit() {
-    let (straight, killed) = (temp("control-straight"), temp("control-killed"));
+    let scratch = tempfile::tempdir().unwrap();
+    let (straight, killed) = (temp(&scratch, "control-straight"), temp(&scratch, "control-killed"));
     let o = schrl(&control_args(straight.to_str().unwrap()));
     assert!(o.status.success(), "{}", stderr(&o));
 
@@ -156,14 +156,12 @@ fn control_train_killed_at_random_moments_resumes_bit_for_bit() {
             .collect()
     };
     assert_eq!(log(&killed), log(&straight), "the metrics log has gaps or repeats");
-    for d in [straight, killed] {
-        std::fs::remove_dir_all(d).unwrap();
-    }
 }
 
 #[test]
 fn ctrl_c_saves_and_the_resumed_run_is_bit_identical() {
-    let (straight, stopped) = (temp("sigint-straight"), temp("sigint-stopped"));
+    let scratch = tempfile::tempdir().unwrap();
+    let (straight, stopped) = (temp(&scratch, "sigint-straight"), temp(&scratch, "sigint-stopped"));
     let o = schrl(&control_args(straight.to_str().unwrap()));
     assert!(o.status.success(), "{}", stderr(&o));
     let out = stopped.to_str().unwrap();
@@ -180,14 +178,12 @@ fn ctrl_c_saves_and_the_resumed_run_is_bit_identical() {
     let o = schrl(&["control", "train", "--resume", "--eval-episodes", "0", "--out", out]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(files(&stopped), files(&straight));
-    for d in [straight, stopped] {
-        std::fs::remove_dir_all(d).unwrap();
-    }
 }
 
 #[test]
 fn a_second_writer_is_refused_while_the_first_runs() {
-    let dir = temp("busy");
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = temp(&scratch, "busy");
     let out = dir.to_str().unwrap();
     let mut args = control_args(out);
     args[5] = "400000";
@@ -205,12 +201,12 @@ fn a_second_writer_is_refused_while_the_first_runs() {
     // Once the writer is gone, the run resumes.
     let o = schrl(&["control", "train", "--resume", "--steps", "8000", "--eval-episodes", "0", "--out", out]);
     assert!(o.status.success(), "{}", stderr(&o));
-    std::fs::remove_dir_all(dir).unwrap();
 }
 
 #[test]
 fn directories_of_another_kind_and_foreign_files_are_refused_by_name() {
-    let dir = temp("kinds");
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = temp(&scratch, "kinds");
     let ctrl = dir.join("controller");
     let c = ctrl.to_str().unwrap();
     tiny_controller(&ctrl, 0);
@@ -261,12 +257,13 @@ fn directories_of_another_kind_and_foreign_files_are_refused_by_name() {
     let o = schrl(&["control", "eval", "--ckpt", c, "--episodes", "1"]);
     let e = stderr(&o);
     assert!(!o.status.success() && e.contains("controller.safetensors") && e.contains("checksum"), "{e}");
-    std::fs::remove_dir_all(dir).unwrap();
 }
 
 #[test]
 fn plan_train_killed_or_interrupted_resumes_bit_for_bit() {
-    let (straight, killed, stopped) = (temp("plan-straight"), temp("plan-killed"), temp("plan-stopped"));
+    let scratch = tempfile::tempdir().unwrap();
+    let (straight, killed, stopped) =
+        (temp(&scratch, "plan-straight"), temp(&scratch, "plan-killed"), temp(&scratch, "plan-stopped"));
     let args = |out: &Path| -> Vec<String> {
         ["plan", "train", "--task", "seq", "--updates", "400", "--target", "1", "--save-every", "10", "--out"]
             .iter()
@@ -301,14 +298,12 @@ fn plan_train_killed_or_interrupted_resumes_bit_for_bit() {
     let o = schrl(&["plan", "train", "--resume", "--out", s]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(files(&stopped), files(&straight));
-    for d in [straight, killed, stopped] {
-        std::fs::remove_dir_all(d).unwrap();
-    }
 }
 
 #[test]
 fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
-    let dir = temp("joint");
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = temp(&scratch, "joint");
     let ctrl = dir.join("controller");
     let c = ctrl.to_str().unwrap();
     tiny_controller(&ctrl, 0);
@@ -366,5 +361,4 @@ fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
     let o = schrl(&["train", "--resume", "--out", s]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(files(&stopped), files(&straight));
-    std::fs::remove_dir_all(dir).unwrap();
 }

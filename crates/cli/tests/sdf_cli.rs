@@ -14,9 +14,8 @@ fn value(out: &std::process::Output, key: &str) -> f64 {
 
 #[test]
 fn fits_draws_checks_and_refuses_to_clobber() {
-    let dir = std::env::temp_dir().join(format!("schrl-sdf-cli-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path();
     let (net, png) = (dir.join("walls.json"), dir.join("walls.png"));
     let (net_s, png_s) = (net.to_str().unwrap(), png.to_str().unwrap());
     let o = schrl(&["sdf", "fit", "--map", "walls", "--steps", "1500", "--out", net_s, "--png", png_s]);
@@ -36,9 +35,8 @@ fn fits_draws_checks_and_refuses_to_clobber() {
 /// `--obstacle exact`, before any training, naming what is wrong.
 #[test]
 fn train_refuses_a_neural_obstacle_that_does_not_fit_the_task() {
-    let dir = std::env::temp_dir().join(format!("schrl-sdf-train-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path();
     let net = dir.join("walls.json");
     let net_s = net.to_str().unwrap();
     let o = schrl(&["sdf", "fit", "--map", "walls", "--steps", "10", "--out", net_s]);

@@ -8,8 +8,8 @@ fn schrl(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn renders_each_robot_with_a_rollout() {
-    let dir = std::env::temp_dir().join(format!("schrl-sim-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path();
     for robot in ["point", "car", "drone"] {
         let out = dir.join(format!("{robot}.png"));
         let _ = std::fs::remove_file(&out);
@@ -39,8 +39,8 @@ fn unknown_robot_or_map_is_a_clear_error() {
 /// it, the Doggo renders like the other robots.
 #[test]
 fn doggo_renders_with_mujoco_and_says_how_to_enable_it_without() {
-    let dir = std::env::temp_dir().join(format!("schrl-sim-cli-doggo-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path();
     let out = dir.join("doggo.png");
     let _ = std::fs::remove_file(&out);
     let o = schrl(&["sim", "render", "--robot", "doggo", "--out", out.to_str().unwrap(), "--rollout", "200"]);

@@ -445,7 +445,8 @@ mod tests {
 
     #[test]
     fn a_bad_setting_is_named_as_users_give_it_and_no_run_is_created() {
-        let dir = std::env::temp_dir().join(format!("schrl-train-bad-{}", std::process::id()));
+        let scratch = tempfile::tempdir().unwrap();
+        let dir = scratch.path().join("train-bad");
         type Spoil = fn(&mut JointRunSettings);
         let cases: [(Spoil, &str); 5] = [
             (|s| s.joint.runs_per_start = 3, "runs_per_start must divide the plan batch (8)"),

@@ -73,8 +73,8 @@ fn tltl_raises_the_spec_score_and_satisfies_an_easy_spec_well_above_chance() {
 #[test]
 fn a_resumed_tltl_run_continues_exactly_as_one_that_never_stopped() {
     let mut straight = TltlTrainer::new(easy_settings(2)).unwrap();
-    let dir = std::env::temp_dir().join(format!("schrl-tltl-resume-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().join("tltl-resume");
     let settings = easy_settings(2);
     let mut run = RunWriter::create(&dir, RunKind::Tltl, &settings, Existing::Refuse).unwrap();
     let mut stopped = TltlTrainer::new(settings).unwrap();
@@ -94,7 +94,6 @@ fn a_resumed_tltl_run_continues_exactly_as_one_that_never_stopped() {
     // Another kind's reader refuses it, naming both kinds.
     let err = store::joint::load(&dir).err().expect("a TLTL run is not a joint run").to_string();
     assert!(err.contains("tltl") && err.contains("joint"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -304,8 +303,8 @@ mod crm {
     /// Trains `settings` for two chunks straight, and for one chunk, saved, loaded and
     /// one more; returns both trainers and the first chunk's and second chunks' metrics.
     fn straight_and_resumed(settings: CrmSettings, name: &str) -> (CrmTrainer, CrmTrainer, [CrmMetrics; 3]) {
-        let dir = std::env::temp_dir().join(format!("schrl-{name}-resume-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let scratch = tempfile::tempdir().unwrap();
+        let dir = scratch.path().join(format!("{name}-resume"));
         let mut run = RunWriter::create(&dir, RunKind::Crm, &settings, Existing::Refuse).unwrap();
         let mut straight = CrmTrainer::new(settings.clone()).unwrap();
         let mut stopped = CrmTrainer::new(settings).unwrap();
@@ -315,7 +314,6 @@ mod crm {
         drop((run, stopped));
         let mut resumed = store::crm::load(&dir).unwrap();
         let (a, b) = (straight.train_chunk().unwrap(), resumed.train_chunk().unwrap());
-        std::fs::remove_dir_all(&dir).unwrap();
         (straight, resumed, [first, a, b])
     }
 

@@ -158,8 +158,8 @@ fn save_run(dir: &std::path::Path, t: &ControlTrainer) {
 
 #[test]
 fn resuming_from_a_checkpoint_continues_exactly() {
-    let dir = std::env::temp_dir().join(format!("schrl-control-resume-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().join("control-resume");
     // Near goals too: their draws come from the checkpointed random streams.
     let cfg = ControlConfig {
         near_goals: Some(NearGoals { fraction: 0.5, within: 1.0 }),
@@ -179,13 +179,12 @@ fn resuming_from_a_checkpoint_continues_exactly() {
     // Starting another run there without permission to replace it is refused.
     let err = RunWriter::create(&dir, RunKind::Controller, &cfg, Existing::Refuse).err().unwrap();
     assert!(err.to_string().contains("already holds a controller run"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn corrupt_or_mismatched_checkpoints_are_clear_errors() {
-    let base = std::env::temp_dir().join(format!("schrl-control-bad-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&base);
+    let scratch = tempfile::tempdir().unwrap();
+    let base = scratch.path().join("control-bad");
     let (a, b) = (base.join("a"), base.join("b"));
     let point = ControlTrainer::new(tiny_config(Robot::Point, 1, 4000)).unwrap();
     let car = ControlTrainer::new(tiny_config(Robot::Car, 1, 4000)).unwrap();
@@ -206,7 +205,6 @@ fn corrupt_or_mismatched_checkpoints_are_clear_errors() {
 
     let err = store::controller::load(&base.join("missing")).err().expect("no checkpoint").to_string();
     assert!(err.contains("missing"), "{err}");
-    std::fs::remove_dir_all(&base).unwrap();
 }
 
 #[test]

@@ -330,8 +330,8 @@ fn an_anchored_planner_stays_near_its_warm_start() {
 fn a_saved_anchored_run_resumes_with_its_anchor() {
     use schrl::plan::cpg::AnchorKind;
     use schrl::store::{Existing, RunKind, RunWriter};
-    let dir = std::env::temp_dir().join(format!("schrl-anchor-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().join("anchor");
     let cfg = JointConfig { anchor_weight: 5.0, anchor_on: AnchorKind::Length, ..JointConfig::default() };
     let mut t = pretrained(TaskKind::Branch, cfg);
     t.iterate().unwrap();
@@ -344,7 +344,6 @@ fn a_saved_anchored_run_resumes_with_its_anchor() {
         m
     };
     assert_eq!(timeless(resumed.iterate().unwrap()), timeless(t.iterate().unwrap()));
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

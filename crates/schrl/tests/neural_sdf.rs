@@ -71,8 +71,8 @@ fn saves_loads_and_refuses_bad_files() {
     let (net, _) =
         NeuralSdf::fit(&Map::by_name("duck").unwrap(), &SdfFitConfig { steps: 50, ..Default::default() })
             .unwrap();
-    let dir = std::env::temp_dir().join(format!("schrl-neural-sdf-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path();
     let path = dir.join("duck.json");
     let _ = std::fs::remove_file(&path);
     store::sdf::save(&net, &path, false).unwrap();

@@ -136,8 +136,8 @@ fn checkpoint_round_trip_gives_the_same_paths() {
     for _ in 0..3 {
         t.update().unwrap();
     }
-    let dir = std::env::temp_dir().join(format!("schrl-ckpt-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().join("ckpt");
     let settings = PlanRunSettings {
         task: TaskKind::Seq,
         safe_along: SafeAlong::Segments,
@@ -164,7 +164,6 @@ fn checkpoint_round_trip_gives_the_same_paths() {
     std::fs::write(dir.join("gen-0/planner.json"), "{ not json").unwrap();
     let err = store::planner::load(&dir).err().unwrap().to_string();
     assert!(err.contains("planner.json"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -177,8 +176,8 @@ fn planners_with_unusable_weights_or_shapes_are_refused_when_loaded() {
         let var = data.values().next().unwrap();
         var.set(&(var.as_tensor() * f64::NAN).unwrap()).unwrap();
     }
-    let dir = std::env::temp_dir().join(format!("schrl-nan-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path().join("nan");
     let settings = PlanRunSettings {
         task: TaskKind::Seq,
         safe_along: SafeAlong::Segments,
@@ -191,7 +190,6 @@ fn planners_with_unusable_weights_or_shapes_are_refused_when_loaded() {
     drop(run);
     let err = store::planner::load(&dir).err().unwrap().to_string();
     assert!(err.contains("planner.safetensors") && err.contains("NaN"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
     // Regression: `min_std: -1` and `bound: 0` were accepted.
     use schrl::plan::planner::{PathPlanner, PlannerConfig};
     for (cfg, key) in [

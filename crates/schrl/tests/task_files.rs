@@ -66,11 +66,9 @@ fn point_seq_is_the_papers_sequence() {
 
 /// Writes a task pair into a fresh directory and loads it.
 fn load(toml_text: &str, spec_text: &str) -> Result<Task, schrl::task::TaskError> {
-    // One directory per call: tests run in parallel and texts may share a length.
-    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let dir = std::env::temp_dir().join(format!("schrl-task-{}-{n}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    // One directory per call (tests run in parallel), removed once the task is read.
+    let scratch = tempfile::tempdir().unwrap();
+    let dir = scratch.path();
     std::fs::write(dir.join("t.toml"), toml_text).unwrap();
     std::fs::write(dir.join("t.stl"), spec_text).unwrap();
     Task::from_file(&dir.join("t.toml"))

@@ -3,14 +3,9 @@
 use sim::render::{Goal, PathKind, Polyline, RobotMarker, Scene, image_size, save};
 use sim::{Map, render::RenderError};
 
-/// A file in a directory of this test's own (tests run in parallel).
-fn tmp(name: &str) -> std::path::PathBuf {
-    let test = std::thread::current().name().unwrap_or("main").replace("::", "-");
-    let dir = std::env::temp_dir().join(format!("schrl-render-{}-{test}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join(name);
-    let _ = std::fs::remove_file(&p);
-    p
+/// `dir/name` in a test's own scratch directory (removed when the test ends).
+fn tmp(dir: &tempfile::TempDir, name: &str) -> std::path::PathBuf {
+    dir.path().join(name)
 }
 
 fn scene(map: &str) -> Scene {
@@ -28,12 +23,13 @@ fn scene(map: &str) -> Scene {
 
 #[test]
 fn writes_png_and_svg_for_every_map() {
+    let scratch = tempfile::tempdir().unwrap();
     for map in ["walls", "empty", "duck"] {
-        let png = tmp(&format!("{map}.png"));
+        let png = tmp(&scratch, &format!("{map}.png"));
         save(&scene(map), &png, false).unwrap();
         let bytes = std::fs::read(&png).unwrap();
         assert_eq!(&bytes[1..4], b"PNG", "{map}");
-        let svg = tmp(&format!("{map}.svg"));
+        let svg = tmp(&scratch, &format!("{map}.svg"));
         save(&scene(map), &svg, false).unwrap();
         assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
     }
@@ -52,13 +48,14 @@ fn the_view_grows_to_hold_what_is_drawn() {
 
 #[test]
 fn refuses_to_replace_a_file_or_guess_a_format() {
-    let p = tmp("keep.png");
+    let scratch = tempfile::tempdir().unwrap();
+    let p = tmp(&scratch, "keep.png");
     std::fs::write(&p, b"precious").unwrap();
     assert!(matches!(save(&scene("walls"), &p, false), Err(RenderError::Exists(_))));
     assert_eq!(std::fs::read(&p).unwrap(), b"precious");
     save(&scene("walls"), &p, true).unwrap();
     assert_ne!(std::fs::read(&p).unwrap(), b"precious");
-    assert!(matches!(save(&scene("walls"), &tmp("x.jpg"), false), Err(RenderError::Format(_))));
+    assert!(matches!(save(&scene("walls"), &tmp(&scratch, "x.jpg"), false), Err(RenderError::Format(_))));
     let dir = p.parent().unwrap();
     let leftovers: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
@@ -90,6 +87,7 @@ fn tick_labels_stay_short() {
 
 #[test]
 fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
+    let scratch = tempfile::tempdir().unwrap();
     use sim::render::{BarChart, BarPanel, ChartPanel, Series, save_bars, save_chart};
     let panel = |y: &str| ChartPanel {
         series: vec![Series {
@@ -102,14 +100,14 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
         y_label: y.into(),
         reference: None,
     };
-    let svg = tmp("curve.svg");
+    let svg = tmp(&scratch, "curve.svg");
     save_chart(&[panel("satisfaction")], "environment steps", &svg, false).unwrap();
     let text = std::fs::read_to_string(&svg).unwrap();
     for want in ["environment steps", "satisfaction", "executed runs", "2e6"] {
         assert!(text.contains(want), "{want} missing from the chart's SVG");
     }
     // PNG text is drawn with the embedded font: the titles change the pixels.
-    let (a, b) = (tmp("a.png"), tmp("b.png"));
+    let (a, b) = (tmp(&scratch, "a.png"), tmp(&scratch, "b.png"));
     save_chart(&[panel("satisfaction")], "environment steps", &a, false).unwrap();
     save_chart(&[panel("")], "", &b, false).unwrap();
     assert_ne!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "PNG text was not drawn");
@@ -124,15 +122,15 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
             y_range: Some((0.0, 1.15)),
         }],
     };
-    let svg = tmp("bars.svg");
+    let svg = tmp(&scratch, "bars.svg");
     save_bars(&bars, &svg, false).unwrap();
     let text = std::fs::read_to_string(&svg).unwrap();
     for want in ["seq", "loop", "(a) SCHRL", "(d) frozen planner", "satisfaction (normalised)"] {
         assert!(text.contains(want), "{want} missing from the bars' SVG");
     }
-    save_bars(&bars, &tmp("bars.png"), false).unwrap();
+    save_bars(&bars, &tmp(&scratch, "bars.png"), false).unwrap();
 
-    let svg = tmp("scene.svg");
+    let svg = tmp(&scratch, "scene.svg");
     save(&scene("walls"), &svg, false).unwrap();
     let text = std::fs::read_to_string(&svg).unwrap();
     for want in
@@ -144,13 +142,14 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
     for colour in ["#28AA50", "#D71E28"] {
         assert!(text.to_uppercase().contains(colour), "{colour} missing from the scene's SVG");
     }
-    let svg = tmp("duck.svg");
+    let svg = tmp(&scratch, "duck.svg");
     save(&scene("duck"), &svg, false).unwrap();
     assert!(std::fs::read_to_string(&svg).unwrap().contains("z (m)"), "the side view's axis");
 }
 
 #[test]
 fn a_series_keeps_its_colour_in_a_panel_that_lacks_the_others() {
+    let scratch = tempfile::tempdir().unwrap();
     // Fig. 3's Loop panel without HTLTL drew TLTL in HTLTL's blue.
     use sim::render::{ChartPanel, Series, save_chart};
     let panel = |colour| ChartPanel {
@@ -164,7 +163,7 @@ fn a_series_keeps_its_colour_in_a_panel_that_lacks_the_others() {
         y_label: "spec score".into(),
         reference: None,
     };
-    let (third, first) = (tmp("third.svg"), tmp("first.svg"));
+    let (third, first) = (tmp(&scratch, "third.svg"), tmp(&scratch, "first.svg"));
     save_chart(&[panel(Some(2))], "environment steps", &third, false).unwrap();
     save_chart(&[panel(None)], "environment steps", &first, false).unwrap();
     // The palette's third colour is the goals' green, its first the executed orange.

@@ -264,8 +264,8 @@ mod tests {
                 ).prop_map(|v| v.concat()),
             ]
         ) {
-            let dir = std::env::temp_dir().join(format!("schrl-trace-fuzz-{}", std::process::id()));
-            std::fs::create_dir_all(&dir).unwrap();
+            let scratch = tempfile::tempdir().unwrap();
+            let dir = scratch.path();
             let path = dir.join("t.csv");
             std::fs::write(&path, &text).unwrap();
             match super::read_trace(&path) {

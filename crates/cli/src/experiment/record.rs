@@ -210,8 +210,8 @@ mod tests {
     fn merged_records_follow_the_full_list_whatever_selection_ran_them() {
         // Signal's cells ran with `--tasks signal` (positions 0, 1), Seq's with every
         // task (positions 0–2 too): ordered by position, the rows came out interleaved.
-        let dir = std::env::temp_dir().join(format!("schrl-merge-order-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let scratch = tempfile::tempdir().unwrap();
+        let dir = scratch.path().join("merge-order");
         let record = |task: &str, method: &str, cell: usize| Record {
             cell,
             ..crate::report::tests::record("fig3", task, method, 0, &[])
@@ -222,7 +222,6 @@ mod tests {
             write(&cell, &r).unwrap();
         }
         let ids: Vec<String> = merge(&dir).unwrap().into_iter().map(|r| r.id).collect();
-        std::fs::remove_dir_all(&dir).unwrap();
         assert_eq!(ids, ["point-seq-tltl-0", "point-signal-schrl-0", "point-signal-htltl-0"]);
     }
 
@@ -246,7 +245,8 @@ mod tests {
 
     #[test]
     fn convergence_waits_for_100_settled_goals_and_options_add_up() {
-        let dir = std::env::temp_dir().join(format!("schrl-converge-{}", std::process::id()));
+        let scratch = tempfile::tempdir().unwrap();
+        let dir = scratch.path().join("converge");
         let log = |name: &str, lines: &[(u64, f64, u64)]| {
             let run = dir.join(name);
             std::fs::create_dir_all(&run).unwrap();
@@ -269,21 +269,19 @@ mod tests {
         assert_eq!(rows["2 options"]["steps to converge"], 12000.0);
         assert!(!rows["4 options"].contains_key("steps to converge"), "option 3 never converged");
         assert_eq!(rows["4 options"]["never converged"], 1.0);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
     fn the_final_score_averages_the_last_window_of_steps() {
-        let dir = std::env::temp_dir().join(format!("schrl-final-score-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::tempdir().unwrap();
+        let dir = scratch.path();
         std::fs::write(dir.join(schrl::store::MANIFEST), r#"{"kind":"tltl"}"#).unwrap();
         let lines = [(100_000, -3.0), (150_000, -1.0), (200_000, 1.0), (250_000, 2.0)]
             .map(|(s, v)| format!("{{\"env_steps\":{s},\"score\":{v}}}"))
             .join("\n");
         std::fs::write(dir.join("metrics.jsonl"), lines + "\n{\"env_steps\":260000}\n").unwrap();
-        assert_eq!(final_score(&dir, 100_000.0).unwrap(), Some(1.5));
+        assert_eq!(final_score(dir, 100_000.0).unwrap(), Some(1.5));
         std::fs::write(dir.join("metrics.jsonl"), "{\"env_steps\":1}\n").unwrap();
-        assert_eq!(final_score(&dir, 100_000.0).unwrap(), None);
-        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(final_score(dir, 100_000.0).unwrap(), None);
     }
 }

@@ -195,7 +195,8 @@ mod tests {
 
     #[test]
     fn a_step_with_a_saved_run_resumes_it_and_cell_paths_expand() {
-        let dir = std::env::temp_dir().join(format!("schrl-args-{}", std::process::id()));
+        let scratch = tempfile::tempdir().unwrap();
+        let dir = scratch.path().join("args");
         let step = Step::train(
             Some("x"),
             "train",
@@ -210,7 +211,6 @@ mod tests {
         std::fs::write(dir.join("run").join(schrl::store::MANIFEST), "{}").unwrap();
         assert_eq!(arguments(&step, &dir, false), ["train", "--resume", "--out", &run]);
         assert_eq!(arguments(&step, &dir, true), fresh, "records name the fresh invocation");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -222,7 +222,8 @@ mod tests {
 
     #[test]
     fn an_experiment_folder_refuses_another_experiment_or_budget() {
-        let dir = std::env::temp_dir().join(format!("schrl-claim-{}", std::process::id()));
+        let scratch = tempfile::tempdir().unwrap();
+        let dir = scratch.path().join("claim");
         let id = |e: &str, quick| Identity { experiment: e.into(), quick };
         claim(&dir, &id("fig3", true)).unwrap();
         claim(&dir, &id("fig3", true)).unwrap();
@@ -233,6 +234,5 @@ mod tests {
         );
         let err = claim(&dir, &id("table2", true)).unwrap_err().to_string();
         assert!(err.contains("choose another --out"), "{err}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
