@@ -211,17 +211,15 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
     let mut tangents = cfg.robustness_cap.is_none();
     for round in 1.. {
         // Stage 1: the most robust plan (the discrete choices that matter).
-        let most = Built::new(task, &formula, &atoms, &active, start, tangents)?;
+        let mut most = Built::new(task, &formula, &atoms, &active, start, tangents)?;
         let without_tangents = most.without_tangents;
-        let (binaries, constraints) = (most.program.binaries.len(), most.program.constraints.len());
-        let mut most = most;
+        let size = Round {
+            binaries: most.program.binaries.len(),
+            constraints: most.program.constraints.len(),
+            number: round,
+        };
         let root = match cfg.robustness_cap {
-            // max min(ρ̃, cap): a plan at the cap ends the search.
-            Some(cap) => {
-                let c = most.program.vars.add(good_lp::variable().max(cap));
-                most.program.constraints.push(Expression::from(c).leq(most.root.clone()));
-                Expression::from(c)
-            }
+            Some(cap) => most.capped(cap),
             None => most.root.clone(),
         };
         let (status, (first, choices, best)) = match most.solve(cfg, left(t0), root, true) {
@@ -231,19 +229,7 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
         if without_tangents && cfg.robustness_cap.is_some_and(|cap| best < cap - 1e-6) {
             // Short of the cap by the claims alone: its plan (not shortened) stands if
             // the program with tangents runs out of time.
-            let mut path = start.to_vec();
-            path.extend(first);
-            let robustness = task.spec().robustness(&path, &hard)?;
-            last = Some(MipPlan {
-                path,
-                robustness,
-                program_robustness: robustness.min(best),
-                optimal: false,
-                seconds: t0.elapsed().as_secs_f64(),
-                binaries,
-                constraints,
-                rounds: round,
-            });
+            last = Some(size.plan(task, [start, &first].concat(), best, false, false, t0)?);
             tangents = true;
             continue;
         }
@@ -274,28 +260,51 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
             }
         }
 
-        let robustness = task.spec().robustness(&path, &hard)?;
-        let plan = MipPlan {
-            path,
-            robustness,
-            // With clauses violated, the program's figure is not a bound: report the plan's.
-            program_robustness: if violated == 0 {
-                program_robustness
-            } else {
-                robustness.min(program_robustness)
-            },
-            optimal: violated == 0 && matches!(status, SolutionStatus::Optimal),
-            seconds: t0.elapsed().as_secs_f64(),
-            binaries,
-            constraints,
-            rounds: round,
-        };
+        // With clauses violated, the program's figure is not a bound on the plan's.
+        let optimal = violated == 0 && matches!(status, SolutionStatus::Optimal);
+        let plan = size.plan(task, path, program_robustness, violated == 0, optimal, t0)?;
         if violated == 0 || plan.seconds >= cfg.time_limit {
             return Ok(plan);
         }
         last = Some(plan);
     }
     unreachable!("the rounds end by returning")
+}
+
+/// One round's program, as a plan reports it.
+#[derive(Clone, Copy)]
+struct Round {
+    binaries: usize,
+    constraints: usize,
+    number: usize,
+}
+
+impl Round {
+    /// This round's plan `path` (the start first), checked with the exact robustness.
+    /// `program` is the program's robustness: reported as it is where it `bounds` the
+    /// plan's, and otherwise no higher than the plan's (an unshortened stage-1 plan, or
+    /// clauses left out that the plan violates).
+    fn plan(
+        self,
+        task: &Task,
+        path: Vec<f64>,
+        program: f64,
+        bounds: bool,
+        optimal: bool,
+        t0: Instant,
+    ) -> Result<MipPlan, MipError> {
+        let robustness = task.spec().robustness(&path, &Semantics::hard())?;
+        Ok(MipPlan {
+            path,
+            robustness,
+            program_robustness: if bounds { program } else { robustness.min(program) },
+            optimal,
+            seconds: t0.elapsed().as_secs_f64(),
+            binaries: self.binaries,
+            constraints: self.constraints,
+            rounds: self.number,
+        })
+    }
 }
 
 /// The last round's plan, when the next round ran out of time: not optimal, and timed
@@ -347,6 +356,14 @@ impl Built {
             encode::Rob::Lin { e, .. } => e,
         };
         Ok(Built { program, root, omitted, without_tangents })
+    }
+
+    /// `min(ρ̃, cap)` as a variable, the objective that ends the search at any plan at
+    /// least `cap` robust.
+    fn capped(&mut self, cap: f64) -> Expression {
+        let c = self.program.vars.add(good_lp::variable().max(cap));
+        self.program.constraints.push(Expression::from(c).leq(self.root.clone()));
+        Expression::from(c)
     }
 
     /// The plan's 1-norm length `Σ |x_t − x_{t−1}|` through `s ≥ ±(x_t − x_{t−1})`, with
