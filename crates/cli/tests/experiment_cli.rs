@@ -184,6 +184,10 @@ fn bad_selections_say_what_is_wrong() {
         let r = schrl(&["experiment", "table1", "--quick", "--out", o]);
         assert!(text(&r.stderr).contains("table1 trains Doggo, which needs MuJoCo"), "{}", text(&r.stderr));
     }
+    // Regression: a cell index out of range was refused after --out was claimed,
+    // leaving experiment.json and cells/ behind.
+    let left: Vec<_> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "a refused selection left {left:?} in --out");
 }
 
 #[test]

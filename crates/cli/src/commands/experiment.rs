@@ -78,8 +78,9 @@ pub fn run(args: Args) -> Result<()> {
              `--features mujoco` (README, Doggo)"
         );
     }
-    runner::claim(&dir, &Identity { experiment: e.name().into(), quick: sel.quick })?;
+    // A bad index is refused before the directory is made.
     let index = cluster::cell_index(args.cell, |v| std::env::var(v).ok(), cells.len())?;
+    runner::claim(&dir, &Identity { experiment: e.name().into(), quick: sel.quick })?;
     let chosen: Vec<usize> = match index {
         Some(i) => vec![i],
         None => (0..cells.len()).collect(),
