@@ -15,11 +15,6 @@ fn fails_with(args: &[&str], needle: &str) {
     assert!(!err.contains("panicked"), "{err}");
 }
 
-/// `dir/name` in a test's own scratch directory (removed when the test ends).
-fn temp(dir: &tempfile::TempDir, name: &str) -> std::path::PathBuf {
-    dir.path().join(name)
-}
-
 #[test]
 fn counts_that_would_allocate_without_bound_are_refused_by_flag() {
     let scratch = tempfile::tempdir().unwrap();
@@ -27,7 +22,7 @@ fn counts_that_would_allocate_without_bound_are_refused_by_flag() {
     // `--rollout 18446744073709551615` grew to gigabytes.
     fails_with(&["plan", "sample", "--ckpt", "x", "--n", "0"], "--n <N>': 0 is outside 1..=100000");
     fails_with(&["plan", "sample", "--ckpt", "x", "--n", "3000000"], "outside 1..=100000");
-    let out = temp(&scratch, "r.png");
+    let out = scratch.path().join("r.png");
     let out = out.to_str().unwrap();
     fails_with(
         &["sim", "render", "--robot", "point", "--out", out, "--rollout", "18446744073709551615"],
@@ -44,11 +39,11 @@ fn bad_training_numbers_are_named_before_a_run_directory_is_made() {
         ("--pg-weight", "inf", "--pg-weight must be a non-negative number, got inf"),
         ("--semantics", "soft:0", "alpha"),
     ] {
-        let dir = temp(&scratch, &format!("run{}", flag.trim_start_matches('-')));
+        let dir = scratch.path().join(format!("run{}", flag.trim_start_matches('-')));
         fails_with(&["train", "--task", "seq", flag, value, "--out", dir.to_str().unwrap()], needle);
         assert!(!dir.exists(), "{flag} {value} left {}", dir.display());
     }
-    let dir = temp(&scratch, "optionrun");
+    let dir = scratch.path().join("optionrun");
     let out = dir.to_str().unwrap();
     fails_with(
         &["control", "train", "--robot", "point", "--goal", "99,0", "--out", out],
@@ -59,7 +54,7 @@ fn bad_training_numbers_are_named_before_a_run_directory_is_made() {
         "is not a free point",
     );
     assert!(!dir.exists());
-    let dir = temp(&scratch, "planrun");
+    let dir = scratch.path().join("planrun");
     fails_with(
         &["plan", "train", "--task", "seq", "--semantics", "lse:-1", "--out", dir.to_str().unwrap()],
         "temperature",
@@ -86,19 +81,19 @@ fn task_check_names_the_regions_to_avoid() {
 fn task_files_without_end_or_sense_are_refused_by_file_and_key() {
     let scratch = tempfile::tempdir().unwrap();
     fails_with(&["task", "check", "/dev/zero"], "/dev/zero: cannot read: larger than 1024 KiB");
-    let toml = temp(&scratch, "c.toml");
+    let toml = scratch.path().join("c.toml");
     let keys = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/tasks/keys.toml");
     let text = std::fs::read_to_string(keys).unwrap().replace("keys.stl", "c.stl");
     std::fs::write(&toml, &text).unwrap();
     // Regression: a spec that is only `true` panicked in training.
-    std::fs::write(temp(&scratch, "c.stl"), "true\n").unwrap();
+    std::fs::write(scratch.path().join("c.stl"), "true\n").unwrap();
     fails_with(&["task", "check", toml.to_str().unwrap()], "c.stl: the spec names no goal");
     fails_with(
-        &["train", "--task", toml.to_str().unwrap(), "--out", temp(&scratch, "t").to_str().unwrap()],
+        &["train", "--task", toml.to_str().unwrap(), "--out", scratch.path().join("t").to_str().unwrap()],
         "constant",
     );
     // Regression: a million waypoints passed `task check` and asked for 16 GB.
-    std::fs::write(temp(&scratch, "c.stl"), "F[1,2] key_a\n").unwrap();
+    std::fs::write(scratch.path().join("c.stl"), "F[1,2] key_a\n").unwrap();
     std::fs::write(&toml, text.replace("steps = 6", "steps = 1000000")).unwrap();
     fails_with(&["task", "check", toml.to_str().unwrap()], "c.toml: steps: 1000000 waypoints");
 }

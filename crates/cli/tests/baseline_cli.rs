@@ -1,6 +1,6 @@
 //! `schrl baseline train|eval` and `schrl plot curves` end to end on a small task file.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 fn schrl(args: &[&str]) -> Output {
@@ -11,11 +11,10 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-/// A fresh scratch directory with the easy task's two files; the directory is removed
-/// when its guard (the first half) is dropped.
-fn workspace() -> (tempfile::TempDir, PathBuf) {
+/// A fresh scratch directory (removed when dropped) with the easy task's two files.
+fn workspace() -> tempfile::TempDir {
     let scratch = tempfile::tempdir().unwrap();
-    let dir = scratch.path().to_path_buf();
+    let dir = scratch.path();
     std::fs::write(
         dir.join("easy.toml"),
         "name = \"easy\"\nrobot = \"point\"\nmap = \"empty\"\nspec = \"easy.stl\"\nsteps = 2\n\
@@ -24,7 +23,7 @@ fn workspace() -> (tempfile::TempDir, PathBuf) {
     )
     .unwrap();
     std::fs::write(dir.join("easy.stl"), "F[1,2] g & G[1,2] safe\n").unwrap();
-    (scratch, dir)
+    scratch
 }
 
 fn updates(run: &Path) -> Vec<u64> {
@@ -37,7 +36,8 @@ fn updates(run: &Path) -> Vec<u64> {
 
 #[test]
 fn tltl_trains_resumes_refuses_to_clobber_evaluates_and_plots() {
-    let (_scratch, dir) = workspace();
+    let scratch = workspace();
+    let dir = scratch.path();
     let task = dir.join("easy.toml");
     let run = dir.join("run");
     let (task, out) = (task.to_str().unwrap(), run.to_str().unwrap());
@@ -84,7 +84,8 @@ fn tltl_trains_resumes_refuses_to_clobber_evaluates_and_plots() {
 
 #[test]
 fn baseline_eval_names_a_directory_that_is_not_a_run() {
-    let (_scratch, dir) = workspace();
+    let scratch = workspace();
+    let dir = scratch.path();
     let o = schrl(&["baseline", "eval", "--ckpt", dir.join("nothing").to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(text(&o.stderr).contains("nothing"), "{}", text(&o.stderr));
@@ -92,7 +93,8 @@ fn baseline_eval_names_a_directory_that_is_not_a_run() {
 
 #[test]
 fn crm_trains_with_a_machine_file_resumes_and_evaluates() {
-    let (_scratch, dir) = workspace();
+    let scratch = workspace();
+    let dir = scratch.path();
     let machine = dir.join("easy.rm.toml");
     std::fs::write(&machine, "initial = \"u0\"\nterminal = [\"done\"]\n[[edge]]\nfrom = \"u0\"\nto = \"done\"\non = \"g\"\nreward = 1.0\n")
         .unwrap();

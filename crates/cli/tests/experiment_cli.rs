@@ -24,13 +24,6 @@ fn ok(o: &Output) -> String {
     text(&o.stdout)
 }
 
-/// An empty scratch directory, removed when its guard (the first half) is dropped.
-fn fresh() -> (tempfile::TempDir, PathBuf) {
-    let scratch = tempfile::tempdir().unwrap();
-    let dir = scratch.path().to_path_buf();
-    (scratch, dir)
-}
-
 fn results(dir: &Path) -> Vec<serde_json::Value> {
     std::fs::read_to_string(dir.join("results.jsonl"))
         .unwrap()
@@ -124,9 +117,10 @@ fn every_experiment_runs_end_to_end_at_quick_size() {
 #[cfg(feature = "mujoco")]
 #[test]
 fn table1_runs_doggo_at_quick_size() {
-    let (_scratch_out, out) = fresh();
-    ok(&quick("table1", &out));
-    let r = &results(&out)[0];
+    let scratch = tempfile::tempdir().unwrap();
+    let out = scratch.path();
+    ok(&quick("table1", out));
+    let r = &results(out)[0];
     assert_eq!(r["robot"], "doggo");
     assert!(r["rows"]["schrl"]["satisfaction"].is_number(), "{r}");
     assert!(out.join("table1.png").exists());
@@ -154,7 +148,8 @@ fn finished_cells_are_skipped_and_another_budget_is_refused() {
 
 #[test]
 fn bad_selections_say_what_is_wrong() {
-    let (_scratch_out, out) = fresh();
+    let scratch = tempfile::tempdir().unwrap();
+    let out = scratch.path();
     let o = out.to_str().unwrap();
     let cases: [(&[&str], &str); 5] = [
         (
@@ -186,13 +181,14 @@ fn bad_selections_say_what_is_wrong() {
     }
     // Regression: a cell index out of range was refused after --out was claimed,
     // leaving experiment.json and cells/ behind.
-    let left: Vec<_> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let left: Vec<_> = std::fs::read_dir(out).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert!(left.is_empty(), "a refused selection left {left:?} in --out");
 }
 
 #[test]
 fn array_tasks_from_the_deploy_files_run_their_own_cell_and_merge() {
-    let (_scratch_out, out) = fresh();
+    let scratch = tempfile::tempdir().unwrap();
+    let out = scratch.path();
     let o = out.to_str().unwrap();
     let sel = ["--quick", "--seeds", "0-1", "--tasks", "seq"];
     let list = ok(&schrl(&[&["experiment", "fig6", "--list"][..], &sel].concat()));
@@ -237,7 +233,7 @@ fn array_tasks_from_the_deploy_files_run_their_own_cell_and_merge() {
     // record in cell order.
     let last = ok(&schrl(&[&["experiment", "fig6", "--jobs", "2", "--out", o][..], &sel].concat()));
     assert!(last.contains("6 of 6 cells finished (3 run now)"), "{last}");
-    let merged: Vec<_> = results(&out).iter().map(|r| r["id"].as_str().unwrap().to_string()).collect();
+    let merged: Vec<_> = results(out).iter().map(|r| r["id"].as_str().unwrap().to_string()).collect();
     assert_eq!(merged, ids);
     // The Kubernetes manifest runs the same command, with the index from the Job.
     let job = std::fs::read_to_string(repo().join("deploy/kubernetes/experiment-job.yaml")).unwrap();
@@ -264,7 +260,8 @@ fn chromium() -> Option<String> {
 #[test]
 fn the_report_has_every_table_and_its_page_renders_tables_and_pictures() {
     let root = quick_runs();
-    let (_scratch_report, report) = fresh();
+    let scratch = tempfile::tempdir().unwrap();
+    let report = scratch.path();
     let dirs: Vec<String> =
         ["table2", "table3-4", "fig3", "fig4"].iter().map(|e| root.join(e).display().to_string()).collect();
     let out = report.join("site");

@@ -2,7 +2,7 @@
 //! directories of another kind, foreign files; and exact resume of every training
 //! command (`control train`, `plan train`, `train`).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
@@ -25,11 +25,6 @@ fn spawn<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Child {
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// `dir/name` in a test's own scratch directory (removed when the test ends).
-fn temp(dir: &tempfile::TempDir, name: &str) -> PathBuf {
-    dir.path().join(name)
 }
 
 fn manifest(dir: &Path) -> serde_json::Value {
@@ -139,7 +134,7 @@ fn control_args(out: &str) -> Vec<&str> {
 #[test]
 fn control_train_killed_at_random_moments_resumes_bit_for_bit() {
     let scratch = tempfile::tempdir().unwrap();
-    let (straight, killed) = (temp(&scratch, "control-straight"), temp(&scratch, "control-killed"));
+    let (straight, killed) = (scratch.path().join("control-straight"), scratch.path().join("control-killed"));
     let o = schrl(&control_args(straight.to_str().unwrap()));
     assert!(o.status.success(), "{}", stderr(&o));
 
@@ -161,7 +156,7 @@ fn control_train_killed_at_random_moments_resumes_bit_for_bit() {
 #[test]
 fn ctrl_c_saves_and_the_resumed_run_is_bit_identical() {
     let scratch = tempfile::tempdir().unwrap();
-    let (straight, stopped) = (temp(&scratch, "sigint-straight"), temp(&scratch, "sigint-stopped"));
+    let (straight, stopped) = (scratch.path().join("sigint-straight"), scratch.path().join("sigint-stopped"));
     let o = schrl(&control_args(straight.to_str().unwrap()));
     assert!(o.status.success(), "{}", stderr(&o));
     let out = stopped.to_str().unwrap();
@@ -183,7 +178,7 @@ fn ctrl_c_saves_and_the_resumed_run_is_bit_identical() {
 #[test]
 fn a_second_writer_is_refused_while_the_first_runs() {
     let scratch = tempfile::tempdir().unwrap();
-    let dir = temp(&scratch, "busy");
+    let dir = scratch.path().join("busy");
     let out = dir.to_str().unwrap();
     let mut args = control_args(out);
     args[5] = "400000";
@@ -206,7 +201,7 @@ fn a_second_writer_is_refused_while_the_first_runs() {
 #[test]
 fn directories_of_another_kind_and_foreign_files_are_refused_by_name() {
     let scratch = tempfile::tempdir().unwrap();
-    let dir = temp(&scratch, "kinds");
+    let dir = scratch.path().join("kinds");
     let ctrl = dir.join("controller");
     let c = ctrl.to_str().unwrap();
     tiny_controller(&ctrl, 0);
@@ -262,8 +257,11 @@ fn directories_of_another_kind_and_foreign_files_are_refused_by_name() {
 #[test]
 fn plan_train_killed_or_interrupted_resumes_bit_for_bit() {
     let scratch = tempfile::tempdir().unwrap();
-    let (straight, killed, stopped) =
-        (temp(&scratch, "plan-straight"), temp(&scratch, "plan-killed"), temp(&scratch, "plan-stopped"));
+    let (straight, killed, stopped) = (
+        scratch.path().join("plan-straight"),
+        scratch.path().join("plan-killed"),
+        scratch.path().join("plan-stopped"),
+    );
     let args = |out: &Path| -> Vec<String> {
         ["plan", "train", "--task", "seq", "--updates", "400", "--target", "1", "--save-every", "10", "--out"]
             .iter()
@@ -303,7 +301,7 @@ fn plan_train_killed_or_interrupted_resumes_bit_for_bit() {
 #[test]
 fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
     let scratch = tempfile::tempdir().unwrap();
-    let dir = temp(&scratch, "joint");
+    let dir = scratch.path().join("joint");
     let ctrl = dir.join("controller");
     let c = ctrl.to_str().unwrap();
     tiny_controller(&ctrl, 0);

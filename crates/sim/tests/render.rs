@@ -3,11 +3,6 @@
 use sim::render::{Goal, PathKind, Polyline, RobotMarker, Scene, image_size, save};
 use sim::{Map, render::RenderError};
 
-/// `dir/name` in a test's own scratch directory (removed when the test ends).
-fn tmp(dir: &tempfile::TempDir, name: &str) -> std::path::PathBuf {
-    dir.path().join(name)
-}
-
 fn scene(map: &str) -> Scene {
     let map = Map::by_name(map).unwrap();
     let dim = map.dim();
@@ -25,11 +20,11 @@ fn scene(map: &str) -> Scene {
 fn writes_png_and_svg_for_every_map() {
     let scratch = tempfile::tempdir().unwrap();
     for map in ["walls", "empty", "duck"] {
-        let png = tmp(&scratch, &format!("{map}.png"));
+        let png = scratch.path().join(format!("{map}.png"));
         save(&scene(map), &png, false).unwrap();
         let bytes = std::fs::read(&png).unwrap();
         assert_eq!(&bytes[1..4], b"PNG", "{map}");
-        let svg = tmp(&scratch, &format!("{map}.svg"));
+        let svg = scratch.path().join(format!("{map}.svg"));
         save(&scene(map), &svg, false).unwrap();
         assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
     }
@@ -49,13 +44,16 @@ fn the_view_grows_to_hold_what_is_drawn() {
 #[test]
 fn refuses_to_replace_a_file_or_guess_a_format() {
     let scratch = tempfile::tempdir().unwrap();
-    let p = tmp(&scratch, "keep.png");
+    let p = scratch.path().join("keep.png");
     std::fs::write(&p, b"precious").unwrap();
     assert!(matches!(save(&scene("walls"), &p, false), Err(RenderError::Exists(_))));
     assert_eq!(std::fs::read(&p).unwrap(), b"precious");
     save(&scene("walls"), &p, true).unwrap();
     assert_ne!(std::fs::read(&p).unwrap(), b"precious");
-    assert!(matches!(save(&scene("walls"), &tmp(&scratch, "x.jpg"), false), Err(RenderError::Format(_))));
+    assert!(matches!(
+        save(&scene("walls"), &scratch.path().join("x.jpg"), false),
+        Err(RenderError::Format(_))
+    ));
     let dir = p.parent().unwrap();
     let leftovers: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
@@ -100,14 +98,14 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
         y_label: y.into(),
         reference: None,
     };
-    let svg = tmp(&scratch, "curve.svg");
+    let svg = scratch.path().join("curve.svg");
     save_chart(&[panel("satisfaction")], "environment steps", &svg, false).unwrap();
     let text = std::fs::read_to_string(&svg).unwrap();
     for want in ["environment steps", "satisfaction", "executed runs", "2e6"] {
         assert!(text.contains(want), "{want} missing from the chart's SVG");
     }
     // PNG text is drawn with the embedded font: the titles change the pixels.
-    let (a, b) = (tmp(&scratch, "a.png"), tmp(&scratch, "b.png"));
+    let (a, b) = (scratch.path().join("a.png"), scratch.path().join("b.png"));
     save_chart(&[panel("satisfaction")], "environment steps", &a, false).unwrap();
     save_chart(&[panel("")], "", &b, false).unwrap();
     assert_ne!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "PNG text was not drawn");
@@ -122,15 +120,15 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
             y_range: Some((0.0, 1.15)),
         }],
     };
-    let svg = tmp(&scratch, "bars.svg");
+    let svg = scratch.path().join("bars.svg");
     save_bars(&bars, &svg, false).unwrap();
     let text = std::fs::read_to_string(&svg).unwrap();
     for want in ["seq", "loop", "(a) SCHRL", "(d) frozen planner", "satisfaction (normalised)"] {
         assert!(text.contains(want), "{want} missing from the bars' SVG");
     }
-    save_bars(&bars, &tmp(&scratch, "bars.png"), false).unwrap();
+    save_bars(&bars, &scratch.path().join("bars.png"), false).unwrap();
 
-    let svg = tmp(&scratch, "scene.svg");
+    let svg = scratch.path().join("scene.svg");
     save(&scene("walls"), &svg, false).unwrap();
     let text = std::fs::read_to_string(&svg).unwrap();
     for want in
@@ -142,7 +140,7 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
     for colour in ["#28AA50", "#D71E28"] {
         assert!(text.to_uppercase().contains(colour), "{colour} missing from the scene's SVG");
     }
-    let svg = tmp(&scratch, "duck.svg");
+    let svg = scratch.path().join("duck.svg");
     save(&scene("duck"), &svg, false).unwrap();
     assert!(std::fs::read_to_string(&svg).unwrap().contains("z (m)"), "the side view's axis");
 }
@@ -163,7 +161,7 @@ fn a_series_keeps_its_colour_in_a_panel_that_lacks_the_others() {
         y_label: "spec score".into(),
         reference: None,
     };
-    let (third, first) = (tmp(&scratch, "third.svg"), tmp(&scratch, "first.svg"));
+    let (third, first) = (scratch.path().join("third.svg"), scratch.path().join("first.svg"));
     save_chart(&[panel(Some(2))], "environment steps", &third, false).unwrap();
     save_chart(&[panel(None)], "environment steps", &first, false).unwrap();
     // The palette's third colour is the goals' green, its first the executed orange.
