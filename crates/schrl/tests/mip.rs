@@ -174,6 +174,30 @@ fn a_robustness_cap_gives_a_shorter_plan_at_least_that_robust() {
 }
 
 #[test]
+fn shortest_chooses_the_near_goal_the_most_robust_plan_passes_over() {
+    // From (2.8, 0) goal a (radius 0.5) is 0.8 m away, the wider hazard disc (radius
+    // 1) 2.8 m: the most robust plan goes to the hazard's centre (robustness 1); the
+    // shortest at least 0.4 robust stops 0.4 m inside a.
+    let task = open("F[1,4] (a | hazard)");
+    let start = [2.8, 0.0];
+    let most = plan(&task, start);
+    assert!(close(most.robustness, 1.0, 1e-6), "{most:?}");
+    let near = |p: &mip::MipPlan| (1..=4).any(|t| (waypoint(p, t)[0] - 2.0).hypot(waypoint(p, t)[1]) < 0.5);
+    assert!(!near(&most), "{:?}", most.path);
+    let cfg = MipConfig { robustness_cap: Some(0.4), shortest: true, ..MipConfig::default() };
+    let short = mip::plan(&task, &start, &cfg).unwrap_or_else(|e| panic!("{e}"));
+    assert!(short.optimal && short.robustness >= 0.4 - 1e-6, "{short:?}");
+    assert!(near(&short), "{:?}", short.path);
+    let length: f64 = (1..=4)
+        .map(|t| {
+            let (a, b) = (waypoint(&short, t - 1), waypoint(&short, t));
+            (a[0] - b[0]).abs() + (a[1] - b[1]).abs()
+        })
+        .sum();
+    assert!(length < 0.75, "{length} m: {:?}", short.path);
+}
+
+#[test]
 fn alternating_between_goals_is_solved_through_claims() {
     // Loop's shape on two goals: at a goal at every waypoint, never the same one twice
     // in a row. The best plan alternates between the centres (robustness 0.5, the

@@ -56,6 +56,11 @@ pub struct MipFlags {
     /// default: the most robust plan).
     #[arg(long)]
     robustness_cap: Option<f64>,
+    /// Shorten over every discrete choice (which goals, which doors), not only those of
+    /// the most robust plan: the shortest plan as robust (slower: a second
+    /// mixed-integer program; on a time-out the unshortened plan is used).
+    #[arg(long)]
+    shortest: bool,
     /// Largest step between waypoints per coordinate, metres.
     #[arg(long, default_value_t = MipConfig::default().max_step)]
     max_step: f64,
@@ -70,6 +75,7 @@ impl MipFlags {
             max_step: self.max_step,
             time_limit: self.time_limit,
             robustness_cap: self.robustness_cap,
+            shortest: self.shortest,
             solver: self.solver,
         };
         c.validate().map_err(|e| anyhow::anyhow!("{}", mip_flag(&e)))?;

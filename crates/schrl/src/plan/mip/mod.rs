@@ -89,6 +89,14 @@ pub struct MipConfig {
     /// Maximise `min(ρ̃, cap)` instead of `ρ̃`: robustness up to the cap, then the
     /// shortest plan (off by default: the most robust plan).
     pub robustness_cap: Option<f64>,
+    /// The second stage chooses afresh: the shortest plan at least as robust as the
+    /// first stage's optimum, over every discrete choice (a mixed-integer program, so
+    /// slower), instead of the shortest with the first stage's choices fixed (a linear
+    /// program). Robustness does not care which goals a plan alternates between, so
+    /// with the choices fixed Point Signal's plans hopped across the diagonals (40 m,
+    /// too long to execute in its step limit). If the second stage runs out of time,
+    /// the first stage's plan comes back unshortened.
+    pub shortest: bool,
     /// The solver.
     pub solver: MipSolver,
 }
@@ -101,6 +109,7 @@ impl Default for MipConfig {
             max_step: 10.0,
             time_limit: 60.0,
             robustness_cap: None,
+            shortest: false,
             solver: MipSolver::default(),
         }
     }
@@ -233,18 +242,26 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
             tangents = true;
             continue;
         }
-        // Stage 2: with those choices fixed, the shortest plan as robust (a linear program).
+        // Stage 2: the shortest plan as robust, with those choices fixed (a linear
+        // program) or, `shortest`, chosen afresh.
         let mut short = Built::new(task, &formula, &atoms, &active, start, tangents)?;
         debug_assert_eq!(short.program.binaries.len(), choices.len(), "the encoding is deterministic");
-        for (b, v) in short.program.binaries.clone().into_iter().zip(choices) {
-            short.program.constraints.push(Expression::from(b).eq(v.round()));
+        if cfg.shortest {
+            // Its time-out leaves the first stage's plan.
+            let unshortened = [start, &first].concat();
+            last = Some(size.plan(task, unshortened, best, false, false, t0)?);
+        } else {
+            for (b, v) in short.program.binaries.clone().into_iter().zip(choices) {
+                short.program.constraints.push(Expression::from(b).eq(v.round()));
+            }
         }
         // A hair below the optimum, so rounding in the first solve cannot make it infeasible.
         let floor = best - 1e-7 * (1.0 + best.abs());
         short.program.constraints.push(short.root.clone().geq(floor));
         let length = short.length(cfg);
         let omitted = short.omitted.clone();
-        let (_, (waypoints, _, program_robustness)) = match short.solve(cfg, left(t0), -length, false) {
+        let (shortened, (waypoints, _, program_robustness)) = match short.solve(cfg, left(t0), -length, false)
+        {
             Err(e) if timed_out(&e) && last.is_some() => return Ok(out_of_time(last, t0)),
             other => other?,
         };
@@ -261,7 +278,9 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
         }
 
         // With clauses violated, the program's figure is not a bound on the plan's.
-        let optimal = violated == 0 && matches!(status, SolutionStatus::Optimal);
+        let optimal = violated == 0
+            && matches!(status, SolutionStatus::Optimal)
+            && (!cfg.shortest || matches!(shortened, SolutionStatus::Optimal));
         let plan = size.plan(task, path, program_robustness, violated == 0, optimal, t0)?;
         if violated == 0 || plan.seconds >= cfg.time_limit {
             return Ok(plan);
