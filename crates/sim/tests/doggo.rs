@@ -3,7 +3,9 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sim::mujoco::{CarTwin, Doggo, FALL_HEIGHT, FALL_TILT_SECONDS, PointTwin, STANDING_HEIGHT};
+use sim::mujoco::{
+    ACTION_FILTER, CarTwin, Doggo, FALL_HEIGHT, FALL_TILT_SECONDS, PointTwin, STANDING_HEIGHT,
+};
 use sim::vec_env::member_seed;
 use sim::{Car, Dynamics, Env, GoalEnv, Map, Point, Robot, Step, VecEnv, make_env};
 
@@ -14,6 +16,9 @@ fn doggo_on(map: &str) -> GoalEnv<Doggo> {
 
 /// Mass of the model (kg), from Safety-Gym's densities and sizes: two torso
 /// cylinders of density 0.5, twelve capsules of density 5.
+/// Observations of a Doggo.
+const OBS: usize = <Doggo as Dynamics>::OBS_DIM;
+
 const MASS: f64 = 0.0397;
 
 /// Its weight (N), with MuJoCo's default gravity.
@@ -55,28 +60,43 @@ fn the_model_has_safety_gyms_joints_springs_motors_and_masses() {
 #[test]
 fn a_full_control_is_a_torque_of_its_gear() {
     let mut env = doggo_on("empty");
-    let mut obs = vec![0.0; 58];
+    let mut obs = vec![0.0; OBS];
     env.reset_into(0, Some(&[0.0, 0.0]), &mut obs).unwrap();
+    assert!(obs[OBS - 12..].iter().all(|c| *c == 0.0), "controls start at rest");
     let mut action = [0.0; 12];
     action[4] = 1.0;
     action[9] = -0.5;
-    env.step_into(&action, &mut obs).unwrap();
-    // The torque each motor puts on its joint (N·m).
-    let (m, d) = (env.dynamics().model(), env.dynamics().data());
-    let torque: Vec<f64> = m
-        .actuator_trnid()
-        .iter()
-        .map(|[j, _]| d.qfrc_actuator()[m.jnt_dofadr()[*j as usize] as usize])
-        .collect();
-    assert_eq!(torque[4], 0.0125, "front right hip y at full control");
-    assert_eq!(torque[9], -0.00625, "back right hip z at half control");
-    assert!(torque.iter().enumerate().all(|(i, t)| i == 4 || i == 9 || *t == 0.0), "{torque:?}");
+    // Held, an action reaches the motors through the filter: a fraction 1 − β^k of it
+    // after k control steps.
+    for k in 1..=3 {
+        env.step_into(&action, &mut obs).unwrap();
+        let reached = 1.0 - ACTION_FILTER.powi(k);
+        // The torque each motor puts on its joint (N·m).
+        let (m, d) = (env.dynamics().model(), env.dynamics().data());
+        let torque: Vec<f64> = m
+            .actuator_trnid()
+            .iter()
+            .map(|[j, _]| d.qfrc_actuator()[m.jnt_dofadr()[*j as usize] as usize])
+            .collect();
+        assert!(
+            (torque[4] - 0.0125 * reached).abs() < 1e-15,
+            "front right hip y at full control: {torque:?}"
+        );
+        assert!(
+            (torque[9] + 0.00625 * reached).abs() < 1e-15,
+            "back right hip z at half control: {torque:?}"
+        );
+        assert!(torque.iter().enumerate().all(|(i, t)| i == 4 || i == 9 || *t == 0.0), "{torque:?}");
+        // The policy observes its controls.
+        assert_eq!(&obs[OBS - 12..], d.ctrl(), "step {k}");
+        assert!((obs[OBS - 12 + 4] - reached).abs() < 1e-15);
+    }
 }
 
 #[test]
 fn loads_and_steps_through_make_env() {
     let mut env = make_env(Robot::Doggo, Map::by_name("walls").unwrap()).unwrap();
-    assert_eq!((env.observation_space().dim(), env.action_space().dim(), env.plan_dim()), (58, 12, 2));
+    assert_eq!((env.observation_space().dim(), env.action_space().dim(), env.plan_dim()), (70, 12, 2));
     let obs = env.reset(3, Some(&[2.0, -2.0])).unwrap();
     assert_eq!(env.position(), &[2.0, -2.0]);
     env.set_goal(&[2.0, 2.0]).unwrap();
@@ -94,7 +114,7 @@ fn loads_and_steps_through_make_env() {
 #[test]
 fn ten_thousand_random_torque_steps_stay_finite_and_bounded() {
     let mut env = doggo_on("walls");
-    let mut obs = vec![0.0; 58];
+    let mut obs = vec![0.0; OBS];
     env.reset_into(11, None, &mut obs).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let mut action = [0.0; 12];
@@ -123,7 +143,7 @@ fn ten_thousand_random_torque_steps_stay_finite_and_bounded() {
 #[test]
 fn stands_at_its_standing_height_with_the_motors_off() {
     let mut env = doggo_on("walls");
-    let mut obs = vec![0.0; 58];
+    let mut obs = vec![0.0; OBS];
     env.reset_into(2, Some(&[2.0, -2.0]), &mut obs).unwrap();
     let zero = [0.0; 12];
     // It drops from Safety-Gym's start height onto its feet; the rear hips then give
@@ -157,7 +177,7 @@ fn stands_at_its_standing_height_with_the_motors_off() {
 #[test]
 fn foot_touch_sensors_fire_when_the_feet_rest_on_the_floor() {
     let mut env = doggo_on("empty");
-    let mut obs = vec![0.0; 58];
+    let mut obs = vec![0.0; OBS];
     env.reset_into(4, Some(&[0.0, 0.0]), &mut obs).unwrap();
     for _ in 0..100 {
         env.step_into(&[0.0; 12], &mut obs).unwrap();
@@ -193,7 +213,7 @@ fn teleport(env: &mut GoalEnv<Doggo>, xyz: [f64; 3], quat: [f64; 4]) {
 #[test]
 fn a_fall_is_reported_and_ends_the_episode() {
     let mut env = doggo_on("empty");
-    let mut obs = vec![0.0; 58];
+    let mut obs = vec![0.0; OBS];
     let upside_down = [0.0, 1.0, 0.0, 0.0];
     // The low-torso rule: on the floor is a fall at once.
     env.reset_into(1, Some(&[0.0, 0.0]), &mut obs).unwrap();
@@ -210,7 +230,7 @@ fn a_fall_is_reported_and_ends_the_episode() {
 #[test]
 fn a_diverged_physics_step_ends_the_episode_where_the_robot_was() {
     let mut env = doggo_on("empty");
-    let mut obs = vec![0.0; 58];
+    let mut obs = vec![0.0; OBS];
     env.reset_into(1, Some(&[1.0, -1.0]), &mut obs).unwrap();
     env.step_into(&[0.0; 12], &mut obs).unwrap();
     let at = env.position().to_vec();
@@ -241,7 +261,7 @@ fn held_over(env: &mut GoalEnv<Doggo>, obs: &mut [f64]) -> bool {
 #[test]
 fn a_tilt_is_a_fall_only_once_it_has_lasted_fall_tilt_seconds() {
     let mut env = doggo_on("empty");
-    let mut obs = vec![0.0; 58];
+    let mut obs = vec![0.0; OBS];
     let over = (FALL_TILT_SECONDS / 0.1).round() as usize;
     env.reset_into(1, Some(&[0.0, 0.0]), &mut obs).unwrap();
     // Over, but righted before the time is up: the clock starts again.
@@ -263,7 +283,7 @@ fn a_tilt_is_a_fall_only_once_it_has_lasted_fall_tilt_seconds() {
 #[test]
 fn touching_a_wall_is_a_collision() {
     let mut env = doggo_on("walls");
-    let mut obs = vec![0.0; 58];
+    let mut obs = vec![0.0; OBS];
     // Beside the wall square at (3, 0), 0.35 m from it: nothing touches.
     env.reset_into(1, Some(&[3.0, -0.8]), &mut obs).unwrap();
     let s = env.step_into(&[0.0; 12], &mut obs).unwrap();
@@ -281,7 +301,7 @@ fn touching_a_wall_is_a_collision() {
 #[test]
 fn saved_state_resumes_bit_for_bit() {
     let mut env = doggo_on("walls");
-    let mut obs = vec![0.0; 58];
+    let mut obs = vec![0.0; OBS];
     env.reset_into(9, None, &mut obs).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let actions: Vec<[f64; 12]> =
@@ -290,16 +310,16 @@ fn saved_state_resumes_bit_for_bit() {
         env.step_into(a, &mut obs).unwrap();
     }
     let saved = env.save_state();
-    let mut before = vec![0.0; 58];
+    let mut before = vec![0.0; OBS];
     env.observe(&mut before);
     let run = |env: &mut GoalEnv<Doggo>| -> Vec<f64> {
-        let mut o = vec![0.0; 58];
+        let mut o = vec![0.0; OBS];
         actions[60..].iter().flat_map(|a| env.step_into(a, &mut o).map(|_| o.clone()).unwrap()).collect()
     };
     let first = run(&mut env);
     let mut fresh = doggo_on("walls");
     fresh.restore_state(&saved).unwrap();
-    let mut after = vec![0.0; 58];
+    let mut after = vec![0.0; OBS];
     fresh.observe(&mut after);
     assert_eq!(before, after, "the restored observation is the saved one");
     assert_eq!(first, run(&mut fresh));
@@ -431,11 +451,11 @@ fn doggos_stepped_in_parallel_match_doggos_stepped_one_by_one() {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
     let mut v = VecEnv::new(Robot::Doggo, map.clone(), n, 21).unwrap();
     let mut alone: Vec<_> = (0..n).map(|_| make_env(Robot::Doggo, map.clone()).unwrap()).collect();
-    let (mut obs, mut one) = (vec![0.0; n * 58], vec![0.0; 58]);
+    let (mut obs, mut one) = (vec![0.0; n * OBS], vec![0.0; OBS]);
     pool.install(|| v.reset_all(21, &mut obs)).unwrap();
     for (i, env) in alone.iter_mut().enumerate() {
         env.reset_into(member_seed(21, i), None, &mut one).unwrap();
-        assert_eq!(&obs[i * 58..(i + 1) * 58], &one[..], "reset of env {i}");
+        assert_eq!(&obs[i * OBS..(i + 1) * OBS], &one[..], "reset of env {i}");
     }
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mut steps = vec![Step::default(); n];
@@ -444,7 +464,7 @@ fn doggos_stepped_in_parallel_match_doggos_stepped_one_by_one() {
         pool.install(|| v.step_all(&actions, &mut obs, &mut steps)).unwrap();
         for (i, env) in alone.iter_mut().enumerate() {
             let s = env.step_into(&actions[i * 12..(i + 1) * 12], &mut one).unwrap();
-            assert_eq!(&obs[i * 58..(i + 1) * 58], &one[..], "env {i} at step {t}");
+            assert_eq!(&obs[i * OBS..(i + 1) * OBS], &one[..], "env {i} at step {t}");
             assert_eq!(steps[i].fell, s.fell);
         }
     }
