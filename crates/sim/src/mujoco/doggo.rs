@@ -334,7 +334,7 @@ impl<'de> Deserialize<'de> for Doggo {
 
 impl Dynamics for Doggo {
     const NAME: &'static str = NAME;
-    const OBS_DIM: usize = 70;
+    const OBS_DIM: usize = SENSORS + 3 * JOINTS + 2 + JOINTS;
     const ACT_DIM: usize = JOINTS;
     const PLAN_DIM: usize = 2;
     const REACH_RADIUS: f64 = 0.3;
