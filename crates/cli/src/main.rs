@@ -35,7 +35,7 @@ enum Command {
     #[command(subcommand)]
     Sdf(commands::sdf::Command),
     /// Train planner and controller together on a task, then evaluate.
-    Train(commands::train::TrainArgs),
+    Train(Box<commands::train::TrainArgs>),
     /// Evaluate a trained task: satisfaction and steps to reach over 5 groups of 100 runs.
     Eval(commands::train::EvalArgs),
     /// Task files: check.
@@ -73,7 +73,7 @@ fn main() -> ExitCode {
         Command::Sdf(cmd) => commands::sdf::run(cmd),
         Command::Control(cmd) => commands::control::run(cmd),
         Command::Task(cmd) => commands::task::run(cmd),
-        Command::Train(args) => commands::train::train(args),
+        Command::Train(args) => commands::train::train(*args),
         Command::Eval(args) => commands::train::eval(args),
         Command::Baseline(cmd) => commands::baseline::run(cmd),
         Command::Plot(cmd) => commands::plot::run(cmd),

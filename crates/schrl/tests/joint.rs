@@ -129,6 +129,32 @@ fn a_tiny_joint_run_raises_the_spec_score_and_trains_both_sides() {
     assert!(t.env_steps > 0);
 }
 
+/// Doggo Seq at the controller's own 3e-4 tore a near-deterministic general
+/// controller apart (KL 1.5 per update); `control_lr` sets the joint phase's step.
+#[test]
+fn the_joint_phase_moves_the_controller_by_its_own_step_size() {
+    let moved = |control_lr: Option<f64>| {
+        let mut cc = ControlConfig::for_robot(Robot::Point);
+        cc.ppo = PpoConfig { rollout: 1000, minibatch: 100, epochs: 2, ..PpoConfig::reference() };
+        let control = ControlTrainer::new(cc).unwrap();
+        let before = control.policy.params.clone();
+        let cfg = JointConfig { plan_batch: 8, control_lr, ..JointConfig::default() };
+        let mut t =
+            JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control).unwrap();
+        while t.iterate().unwrap().control.is_none() {}
+        let after = &t.control.policy.params;
+        before.iter().zip(after).map(|(a, b)| (a - b).abs()).fold(0.0_f32, f32::max)
+    };
+    let (own, small) = (moved(None), moved(Some(3e-6)));
+    // Adam moves each parameter by about the step size per minibatch.
+    assert!(own > 30.0 * small && small > 0.0, "3e-4: {own}, 3e-6: {small}");
+    let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
+    let cfg = JointConfig { control_lr: Some(-1e-4), ..JointConfig::default() };
+    let err =
+        JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control).err().unwrap();
+    assert!(err.to_string().contains("control_lr"), "{err}");
+}
+
 #[test]
 fn a_task_for_another_robot_is_refused() {
     let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Car)).unwrap();

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use rand::SeedableRng;
-use schrl::task::{TASK_ROBOTS, Task, TaskKind};
+use schrl::task::{MIN_PLANNED_RADIUS, TASK_ROBOTS, Task, TaskKind};
 
 fn repo_tasks() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tasks")
@@ -205,6 +205,17 @@ fn an_unknown_safe_along_is_named() {
         load(&GOOD.replace("safe_radius = 0.1", "safe_radius = 0.1\nsafe_along = \"edges\""), "G[1,2] safe")
             .unwrap_err();
     assert!(e.to_string().contains("edges") && e.to_string().contains("line 9"), "{e}");
+}
+
+#[test]
+fn doggo_seq_goals_keep_room_for_the_planners_sampling_spread() {
+    // Doggo Seq's 0.3 m goals shrunk to 0.2 m left pre-training without a planner.
+    let seq = Task::builtin("doggo", TaskKind::Seq).unwrap();
+    assert!(seq.with_goal_margin(0.3).goals.iter().all(|g| (g.radius - MIN_PLANNED_RADIUS).abs() < 1e-12));
+    // A 0.4 m goal shrinks to the floor, not by its third.
+    let text = GOOD.replace("radius = 0.5", "radius = 0.4");
+    let t = load(&text, "F[1,2] home").unwrap();
+    assert!((t.with_goal_margin(0.3).goals[0].radius - MIN_PLANNED_RADIUS).abs() < 1e-12);
 }
 
 #[test]

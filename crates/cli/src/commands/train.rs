@@ -94,6 +94,10 @@ pub struct TrainArgs {
     /// the spec's unit-scale advantages [default: 0.3].
     #[arg(long)]
     control_weight: Option<f64>,
+    /// The controller's PPO step size in the joint phase [default: the controller's
+    /// own, 3e-4].
+    #[arg(long)]
+    control_lr: Option<f64>,
     /// Weight per metre of the path-length term the planner follows in the joint phase
     /// [default: 0.05].
     #[arg(long)]
@@ -178,6 +182,7 @@ impl TrainArgs {
         set(&mut j.safe_margin, self.safe_margin);
         set(&mut j.runs_per_start, self.runs_per_start);
         set(&mut j.control_weight, self.control_weight);
+        set(&mut j.control_lr, self.control_lr.map(Some));
         set(&mut j.length_weight, self.length_weight);
         j.freeze_planner = self.freeze_planner;
         j.freeze_controller = self.freeze_controller;
@@ -275,6 +280,7 @@ impl TrainArgs {
                 ("--freeze-planner", self.freeze_planner && !saved.joint.freeze_planner),
                 ("--runs-per-start", differs(&self.runs_per_start, &saved.joint.runs_per_start)),
                 ("--control-weight", differs(&self.control_weight, &saved.joint.control_weight)),
+                ("--control-lr", differs(&self.control_lr.map(Some), &saved.joint.control_lr)),
                 ("--length-weight", differs(&self.length_weight, &saved.joint.length_weight)),
                 ("--anchor-weight", differs(&self.anchor_weight, &saved.joint.anchor_weight)),
                 ("--anchor-on", differs(&self.anchor_on, &saved.joint.anchor_on)),
