@@ -129,8 +129,8 @@ fn a_tiny_joint_run_raises_the_spec_score_and_trains_both_sides() {
     assert!(t.env_steps > 0);
 }
 
-/// Doggo Seq at the controller's own 3e-4 tore a near-deterministic general
-/// controller apart (KL 1.5 per update); `control_lr` sets the joint phase's step.
+/// Doggo's near-deterministic general controller jolts at its own 3e-4 in the joint
+/// phase (KL 5.9 per update); `control_lr` sets the joint phase's step.
 #[test]
 fn the_joint_phase_moves_the_controller_by_its_own_step_size() {
     let moved = |control_lr: Option<f64>| {
