@@ -215,3 +215,35 @@ fn alternating_between_goals_is_solved_through_claims() {
     let p = plan(&open("F[1,1] !hazard & G[1,2] !a & F[2,2] b"), [1.0, 1.5]);
     assert!(p.optimal && p.satisfied() && p.program_robustness <= p.robustness + 1e-9, "{p:?}");
 }
+
+#[test]
+fn satisfying_first_reaches_the_whole_programs_optimum_through_the_doors() {
+    // The floor and the cell cuts hold for the optimum, so it is the same plan's
+    // robustness, found in one program.
+    let task = Task::point(TaskKind::Seq);
+    let cfg = MipConfig { satisfying_first: Some(true), ..MipConfig::default() };
+    let p = mip::plan(&task, &[1.5, -1.5], &cfg).unwrap_or_else(|e| panic!("{e}"));
+    assert!(p.optimal && p.rounds == 1, "{p:?}");
+    assert!(close(p.robustness, 0.5, 1e-6) && close(p.program_robustness, 0.5, 1e-6), "{p:?}");
+    for t in 1..=task.steps {
+        let (a, b) = (waypoint(&p, t - 1), waypoint(&p, t));
+        assert!(task.map.segment_sdf(&a, &b) >= task.safe_radius - 1e-9, "segment {t} cuts a wall");
+    }
+    // With a cap: a plan at the cap, asked for first.
+    let capped = MipConfig { robustness_cap: Some(0.3), ..cfg };
+    let p = mip::plan(&task, &[1.5, -1.5], &capped).unwrap_or_else(|e| panic!("{e}"));
+    assert!(p.optimal && p.rounds == 1 && p.program_robustness >= 0.3 - 1e-6, "{p:?}");
+    assert!(p.robustness >= p.program_robustness - 1e-9, "{p:?}");
+}
+
+#[test]
+fn satisfying_first_falls_back_to_the_whole_program_when_no_plan_satisfies() {
+    let task = open("F[1,1] a & F[1,1] b");
+    let cfg = MipConfig { satisfying_first: Some(true), ..MipConfig::default() };
+    let first = mip::plan(&task, &[-3.0, -1.0], &cfg).unwrap_or_else(|e| panic!("{e}"));
+    let whole = plan(&task, [-3.0, -1.0]);
+    // Two programs: the one asking for a satisfying plan (infeasible), then the whole.
+    assert_eq!(first.rounds, 2, "{first:?}");
+    assert!(first.optimal && !first.satisfied());
+    assert!(close(first.program_robustness, whole.program_robustness, 1e-6), "{first:?} {whole:?}");
+}

@@ -64,6 +64,11 @@ pub struct MipFlags {
     /// Largest step between waypoints per coordinate, metres.
     #[arg(long, default_value_t = MipConfig::default().max_step)]
     max_step: f64,
+    /// Ask first for a satisfying plan (robustness at least the cap, or 1 mm), with
+    /// cuts valid for such plans, then the whole program if there is none [default:
+    /// true with highs, false with microlp].
+    #[arg(long)]
+    satisfying_first: Option<bool>,
 }
 
 impl MipFlags {
@@ -77,6 +82,7 @@ impl MipFlags {
             robustness_cap: self.robustness_cap,
             shortest: self.shortest,
             solver: self.solver,
+            satisfying_first: self.satisfying_first,
         };
         c.validate().map_err(|e| anyhow::anyhow!("{}", mip_flag(&e)))?;
         Ok(c)
@@ -608,9 +614,11 @@ impl MipTimes {
 
     fn note(&self, cfg: &MipConfig) -> String {
         let n = self.seconds.len();
+        let first = cfg.satisfying_first.unwrap_or(cfg.solver.satisfying_first());
         format!(
-            " ({}; {}/{n} proved optimal, {:.1} rounds per plan)",
+            " ({}{}; {}/{n} proved optimal, {:.1} rounds per plan)",
             cfg.solver.name(),
+            if first { ", satisfying first" } else { "" },
             self.proved,
             self.rounds as f64 / n.max(1) as f64
         )

@@ -52,6 +52,7 @@ use stl::{Formula, Interval, UntilRule};
 
 use super::MipError;
 use super::geometry::{Atoms, Shape};
+use crate::task::OPEN_CLEARANCE;
 
 /// A lower bound of a robustness value: a number, or an affine expression in the
 /// program's variables with the interval it can take.
@@ -105,6 +106,9 @@ pub(super) struct Program {
     pub binaries: Vec<Variable>,
     /// Claims: "waypoint `t` is in goal disc `j`", by `(t, j)`.
     claims: HashMap<(usize, usize), Variable>,
+    /// "The segment into waypoint `t` (or the waypoint) lies in the walls' free cell
+    /// `c`", by `(t, c)`.
+    cells: HashMap<(usize, usize), Variable>,
     start: [f64; 2],
     lo: [f64; 2],
     hi: [f64; 2],
@@ -116,7 +120,8 @@ impl Program {
     pub fn new(start: [f64; 2], steps: usize, (lo, hi): ([f64; 2], [f64; 2])) -> Self {
         let mut vars = ProblemVariables::new();
         let x = (0..steps).map(|_| [0, 1].map(|k| vars.add(variable().min(lo[k]).max(hi[k])))).collect();
-        Self { vars, constraints: vec![], x, binaries: vec![], claims: HashMap::new(), start, lo, hi }
+        let (claims, cells) = (HashMap::new(), HashMap::new());
+        Self { vars, constraints: vec![], x, binaries: vec![], claims, cells, start, lo, hi }
     }
 
     /// The start (waypoint 0).
@@ -231,6 +236,41 @@ impl Program {
         let a = self.binary();
         self.claims.insert((t, disc), a);
         a
+    }
+
+    /// The binary "the segment into waypoint `t` lies in free cell `cell`" (made once:
+    /// every occurrence of the walls at `t` has the same best cell).
+    fn in_cell(&mut self, t: usize, cell: usize) -> Variable {
+        if let Some(&z) = self.cells.get(&(t, cell)) {
+            return z;
+        }
+        let z = self.binary();
+        self.cells.insert((t, cell), z);
+        z
+    }
+
+    /// Consecutive segments in cells that meet: for each `t` with `t + 1` also in
+    /// `at`, a cell chosen for one segment needs a cell that `meet`s it chosen for the
+    /// other (they share waypoint `t`). Valid only for plans in which the walls hold at
+    /// every waypoint of `at` (each segment truly in a cell it claims): the planner adds
+    /// these with `ρ̃ ≥ cap > 0` required.
+    pub fn link_cells(&mut self, at: &[usize], meet: &[Vec<bool>]) {
+        for &t in at.iter().filter(|&&t| at.contains(&(t + 1))) {
+            for (a, b) in [(t, t + 1), (t + 1, t)] {
+                for c in 0..meet.len() {
+                    let (Some(&z), true) =
+                        (self.cells.get(&(a, c)), (0..meet.len()).all(|d| self.cells.contains_key(&(b, d))))
+                    else {
+                        continue;
+                    };
+                    let mut next = Expression::from(0.0);
+                    for d in (0..meet.len()).filter(|&d| meet[c][d]) {
+                        next += self.cells[&(b, d)];
+                    }
+                    self.constraints.push(Expression::from(z).leq(next));
+                }
+            }
+        }
     }
 
     /// `max` of operands with binaries of their own and operands gated by claims:
@@ -382,6 +422,19 @@ impl<'a> Encoder<'a> {
         &self.omitted
     }
 
+    /// The waypoints `t ≥ 1` at which `name` is a conjunct of `f` at `t`: reached from
+    /// the root through `∧`, `□` and `○` alone, so a plan with `ρ̃(f) > 0` has `name`
+    /// positive at each of them.
+    pub fn required(&self, f: &Formula, t: usize, name: &str, out: &mut Vec<usize>) {
+        match f {
+            Formula::Atom(a) if a == name && t >= 1 && !out.contains(&t) => out.push(t),
+            Formula::And(v) => v.iter().for_each(|c| self.required(c, t, name, out)),
+            Formula::Globally(iv, c) => self.window(t, iv).for_each(|k| self.required(c, k, name, out)),
+            Formula::Next(c) => self.required(c, (t + 1).min(self.n - 1), name, out),
+            _ => {}
+        }
+    }
+
     /// The window `[t + a, t + b]` cut at the last waypoint (the library's rule).
     fn window(&self, t: usize, iv: &Interval) -> std::ops::RangeInclusive<usize> {
         let last = self.n - 1;
@@ -515,6 +568,18 @@ impl<'a> Encoder<'a> {
     }
 
     fn atom(&mut self, name: &str, t: usize, sign: f64, offset: f64) -> Result<Rob, MipError> {
+        let (cells, _) = self.atoms.cells(name);
+        if sign > 0.0 && t >= 1 && cells > 0 {
+            // Clear of the walls: in one of their free cells, each a labelled binary.
+            let mut options = vec![];
+            for c in 0..cells {
+                let shape = self.atoms.in_cell(name, t, c, offset).expect("the walls have cells");
+                let value = self.program.shape(&shape);
+                options.push(Opt::Claimed(value, self.program.in_cell(t, c)));
+            }
+            let in_some_cell = self.max_of(options);
+            return Ok(self.program.min(vec![Rob::Const(OPEN_CLEARANCE + offset), in_some_cell]));
+        }
         if sign < 0.0 && t >= 1 && self.disc(name).is_some() {
             // Keeping out of a goal disc: its tangents and the claims of the other discs.
             let mut options = vec![];
@@ -646,5 +711,36 @@ fn keeps_out_of_a_goal(f: &Formula, positive: bool, discs: &[(String, [f64; 2], 
             keeps_out_of_a_goal(l, !positive, discs) || keeps_out_of_a_goal(r, positive, discs)
         }
         _ => f.children().any(|c| keeps_out_of_a_goal(c, positive, discs)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::task::{Task, TaskKind};
+
+    /// The waypoints at which `spec` requires the walls, on Point Cover's 8 waypoints.
+    fn required(spec: &str) -> Vec<usize> {
+        let task = Task::point(TaskKind::Cover);
+        let atoms = Atoms::of_task(&task, &[1.5, -1.5], 16, 8).expect("Cover encodes");
+        let mut program = Program::new([1.5, -1.5], task.steps, ([-3.5, -3.5], [3.5, 3.5]));
+        let formula = stl::parse(spec).expect("a valid spec");
+        let active = HashSet::new();
+        let encoder = Encoder::new(&mut program, &atoms, &active, (UntilRule::Standard, 1e9), &formula, true);
+        let mut out = vec![];
+        encoder.required(&formula, 0, "safe", &mut out);
+        out.sort();
+        out
+    }
+
+    #[test]
+    fn the_walls_are_required_only_where_every_satisfying_plan_keeps_them() {
+        assert_eq!(required("F[1,8] g0 & G[1,8] safe"), (1..=8).collect::<Vec<_>>());
+        assert_eq!(required("G[2,3] (safe & F[0,8] g1)"), vec![2, 3]);
+        assert_eq!(required("X safe & G[7,20] safe"), vec![1, 7, 8], "windows cut at the last waypoint");
+        // Under a disjunction, an eventually or a negation a plan may do without them.
+        assert!(required("G[1,8] (safe | g0)").is_empty());
+        assert!(required("F[1,8] safe").is_empty());
+        assert!(required("!(F[1,8] !safe)").is_empty());
     }
 }

@@ -66,6 +66,8 @@ pub(super) struct Atoms {
     start: Vec<f64>,
     sides: usize,
     outside_sides: usize,
+    /// The plan region.
+    region: ([f64; 2], [f64; 2]),
 }
 
 impl Atoms {
@@ -111,7 +113,8 @@ impl Atoms {
             }
             exact.insert(name, p);
         }
-        Ok(Atoms { geometry, exact, start: start.to_vec(), sides, outside_sides })
+        let region = ([lo[0], lo[1]], [hi[0], hi[1]]);
+        Ok(Atoms { geometry, exact, start: start.to_vec(), sides, outside_sides, region })
     }
 
     /// The goal discs read at waypoints, `(name, centre, radius)`, sorted by name: where
@@ -163,7 +166,7 @@ impl Atoms {
                 });
                 Ok(Shape::Max(pieces.collect()))
             }
-            Geometry::Walls { cells, radius, along } => {
+            Geometry::Walls { cells, .. } => {
                 let open = Shape::Const(sign * OPEN_CLEARANCE + offset);
                 if cells.is_empty() {
                     return Ok(open);
@@ -173,15 +176,46 @@ impl Atoms {
                         "'!safe' (being inside an obstacle): the MIP planner encodes staying clear".into(),
                     ));
                 }
-                let ends: &[usize] = if *along == SafeAlong::Segments { &[t - 1, t] } else { &[t] };
                 // In some cell, every end at least the clearance beyond every side.
-                let in_cell = |cell: &Cell| {
-                    let beyond = cell.iter().flat_map(|&(u, d)| ends.iter().map(move |&s| (s, u, d)));
-                    Shape::Min(beyond.map(|(s, u, d)| affine(&[(s, u)], -d - radius + offset)).collect())
-                };
-                Ok(Shape::Min(vec![open, Shape::Max(cells.iter().map(in_cell).collect())]))
+                let in_cells = (0..cells.len()).filter_map(|c| self.in_cell(name, t, c, offset));
+                Ok(Shape::Min(vec![open, Shape::Max(in_cells.collect())]))
             }
         }
+    }
+
+    /// The number of free cells of the walls `name` stands for (0: not the walls, or an
+    /// open map) and whether its clearance is read along segments.
+    pub(super) fn cells(&self, name: &str) -> (usize, SafeAlong) {
+        match self.geometry.get(name) {
+            Some(Geometry::Walls { cells, along, .. }) => (cells.len(), *along),
+            _ => (0, SafeAlong::Waypoints),
+        }
+    }
+
+    /// Which of the walls' free cells meet: `meet[a][b]` unless no point is inside
+    /// both (checked on the 5 cm grid of [`free_cells`], counting points up to one
+    /// grid step outside, so a pair that meets anywhere is never missed).
+    pub(super) fn cells_meet(&self, name: &str) -> Vec<Vec<bool>> {
+        let Some(Geometry::Walls { cells, .. }) = self.geometry.get(name) else {
+            return vec![];
+        };
+        let depths: Vec<Vec<f64>> =
+            cells.iter().map(|c| region_grid(&self.region).map(|p| depth(c, p)).collect()).collect();
+        let step = grid_step(&self.region);
+        let meet = |a: &[f64], b: &[f64]| a.iter().zip(b).any(|(x, y)| *x > -step && *y > -step);
+        depths.iter().map(|a| depths.iter().map(|b| meet(a, b)).collect()).collect()
+    }
+
+    /// `value(name) + offset` for "the segment into waypoint `t` (or the waypoint, as
+    /// the task reads `safe`) lies in free cell `cell`": every end at least the
+    /// clearance beyond every side of the cell. `None` if `name` is not the walls.
+    pub(super) fn in_cell(&self, name: &str, t: usize, cell: usize, offset: f64) -> Option<Shape> {
+        let Some(Geometry::Walls { cells, radius, along }) = self.geometry.get(name) else {
+            return None;
+        };
+        let ends: &[usize] = if *along == SafeAlong::Segments { &[t - 1, t] } else { &[t] };
+        let beyond = cells[cell].iter().flat_map(|&(u, d)| ends.iter().map(move |&s| (s, u, d)));
+        Some(Shape::Min(beyond.map(|(s, u, d)| affine(&[(s, u)], -d - radius + offset)).collect()))
     }
 }
 
@@ -241,6 +275,30 @@ fn cached_free_cells(boxes: &[([f64; 2], [f64; 2])], (lo, hi): (&[f64], &[f64]))
     cells
 }
 
+/// Points of the region `(lo, hi)`, 141 by 141 (a 5 cm grid on the walls map).
+fn region_grid((lo, hi): &([f64; 2], [f64; 2])) -> impl Iterator<Item = [f64; 2]> + '_ {
+    (0..=GRID).flat_map(move |i| {
+        (0..=GRID).map(move |j| {
+            let (a, b) = (i as f64 / GRID as f64, j as f64 / GRID as f64);
+            [lo[0] + a * (hi[0] - lo[0]), lo[1] + b * (hi[1] - lo[1])]
+        })
+    })
+}
+
+/// Grid intervals per side of [`region_grid`].
+const GRID: usize = 140;
+
+/// The diagonal of one grid square: every point of the region is within half of it of
+/// a grid point.
+fn grid_step((lo, hi): &([f64; 2], [f64; 2])) -> f64 {
+    ((hi[0] - lo[0]) / GRID as f64).hypot((hi[1] - lo[1]) / GRID as f64)
+}
+
+/// How far `p` is beyond every side of `cell` (negative: outside it).
+fn depth(cell: &Cell, p: [f64; 2]) -> f64 {
+    cell.iter().map(|&(u, d)| dot(u, p) - d).fold(f64::INFINITY, f64::min)
+}
+
 /// The free cells of a map of boxes within the plan region: every set of one or two
 /// box sides that has every box behind one of them and room beyond them, less those
 /// another cell contains (compared on a 5 cm grid). On the walls map: the four rooms
@@ -275,14 +333,9 @@ pub(super) fn free_cells(boxes: &[([f64; 2], [f64; 2])], (lo, hi): (&[f64], &[f6
         }
     }
     // Depth of each candidate on a grid; drop empty cells and those another covers.
-    let grid: Vec<[f64; 2]> = (0..=140)
-        .flat_map(|i| (0..=140).map(move |j| [i as f64 / 140.0, j as f64 / 140.0]))
-        .map(|[a, b]| [lo[0] + a * (hi[0] - lo[0]), lo[1] + b * (hi[1] - lo[1])])
-        .collect();
-    let depth =
-        |cell: &Cell, p: [f64; 2]| cell.iter().map(|&(u, d)| dot(u, p) - d).fold(f64::INFINITY, f64::min);
+    let region = ([lo[0], lo[1]], [hi[0], hi[1]]);
     let depths: Vec<Vec<f64>> =
-        candidates.iter().map(|c| grid.iter().map(|&p| depth(c, p)).collect()).collect();
+        candidates.iter().map(|c| region_grid(&region).map(|p| depth(c, p)).collect()).collect();
     let mut keep = vec![];
     for (a, da) in depths.iter().enumerate() {
         if da.iter().all(|&v| v <= 0.0) {
@@ -320,6 +373,23 @@ mod tests {
                     assert!(depth <= map.sdf(&p) + 1e-9 || depth <= 0.0, "{cell:?} at {p:?}");
                 }
             }
+        }
+        // Which cells meet: a room (two perpendicular sides) meets the two bands through
+        // its doors and no other room (the walls are between them); the bands (two
+        // opposite sides) cross each other in the rooms' outer corners.
+        let atoms =
+            Atoms::of_task(&crate::task::Task::point(crate::task::TaskKind::Cover), &[1.5, -1.5], 16, 8)
+                .expect("the Cover task encodes");
+        let meet = atoms.cells_meet("safe");
+        assert_eq!(meet.len(), 8);
+        let room = |c: &Cell| dot(c[0].0, c[1].0) == 0.0;
+        for (a, row) in meet.iter().enumerate() {
+            assert!(row[a], "cell {a} meets itself");
+            assert!((0..8).all(|b| meet[b][a] == row[b]), "symmetric");
+            let rooms = (0..8).filter(|&b| b != a && row[b] && room(&cells[b])).count();
+            let bands = (0..8).filter(|&b| b != a && row[b] && !room(&cells[b])).count();
+            let expected = if room(&cells[a]) { (0, 2) } else { (2, 2) };
+            assert_eq!((rooms, bands), expected, "cell {a}: {:?} meets {row:?}", cells[a]);
         }
         // Each door's middle and each room's middle lies deep in some cell.
         for p in [[2.0, 0.0], [0.0, 2.0], [-2.0, 0.0], [0.0, -2.0], [2.0, 2.0], [-2.0, -2.0]] {
