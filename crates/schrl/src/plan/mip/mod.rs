@@ -16,6 +16,11 @@
 //!   [`MipConfig::robustness_cap`] `ε`, the first stage maximises `min(ρ̃, ε)`: any plan
 //!   at least `ε` robust ends the search, and the second shortens it keeping `ε`.
 //!
+//! * Satisfying first ([`MipConfig::satisfying_first`], HiGHS's default): stage 1 first
+//!   asks for `ρ̃` at least the cap (or 1 mm), with cuts valid only for such plans
+//!   (consecutive segments in free cells that meet); the whole program follows only if
+//!   no plan meets it. The optimum is the same either way.
+//!
 //! Every plan is checked with the exact hard robustness of the task's spec
 //! ([`MipPlan::robustness`]), which is at least the program's `ρ̃`
 //! ([`MipPlan::program_robustness`]) and exceeds it by the polygons' error at most.
