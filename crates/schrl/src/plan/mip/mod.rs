@@ -254,6 +254,8 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
     // Satisfying first: a plan at the cap (or at least `SATISFYING` robust) is asked for,
     // with the cuts that hold for such plans alone; if there is none, the whole program.
     let mut satisfying_first = cfg.satisfying_first.unwrap_or(cfg.solver.satisfying_first());
+    // Which free cells meet: read on a grid, once per plan and only when the cuts are used.
+    let meet = if satisfying_first { atoms.cells_meet(WALLS) } else { vec![] };
     for round in 1.. {
         // Stage 1: the most robust plan (the discrete choices that matter).
         let mut most = Built::new(task, &formula, &atoms, &active, start, tangents)?;
@@ -263,7 +265,7 @@ pub fn plan(task: &Task, start: &[f64], cfg: &MipConfig) -> Result<MipPlan, MipE
             None => most.root.clone(),
         };
         if satisfying_first {
-            most.require(cfg.robustness_cap.unwrap_or(SATISFYING));
+            most.require(cfg.robustness_cap.unwrap_or(SATISFYING), &meet);
         }
         let size = Round {
             binaries: most.program.binaries.len(),
@@ -391,8 +393,8 @@ struct Built {
     /// Whether some keep-out went by its claims alone.
     without_tangents: bool,
     /// The waypoints at which the walls are a conjunct of the spec (the segments a
-    /// satisfying plan keeps inside a free cell), and which free cells meet.
-    walls: (Vec<usize>, Vec<Vec<bool>>),
+    /// satisfying plan keeps inside a free cell).
+    walls_required: Vec<usize>,
 }
 
 /// What a solve gives: waypoints, the binaries' values, the root's value.
@@ -430,17 +432,15 @@ impl Built {
             encode::Rob::Const(c) => Expression::from(c),
             encode::Rob::Lin { e, .. } => e,
         };
-        let walls = (required, atoms.cells_meet(WALLS));
-        Ok(Built { program, root, omitted, without_tangents, walls })
+        Ok(Built { program, root, omitted, without_tangents, walls_required: required })
     }
 
     /// Asks for `ρ̃ ≥ floor` (`floor > 0`) and adds what holds for such plans alone:
     /// consecutive segments the spec keeps clear of the walls lie in free cells that
-    /// meet.
-    fn require(&mut self, floor: f64) {
+    /// `meet` (which free cells meet, [`geometry::Atoms::cells_meet`]).
+    fn require(&mut self, floor: f64, meet: &[Vec<bool>]) {
         self.program.constraints.push(self.root.clone().geq(floor));
-        let (at, meet) = &self.walls;
-        self.program.link_cells(at, meet);
+        self.program.link_cells(&self.walls_required, meet);
     }
 
     /// `min(ρ̃, cap)` as a variable, the objective that ends the search at any plan at
