@@ -111,6 +111,17 @@ fn every_experiment_runs_end_to_end_at_quick_size() {
         let dir = root.join(&picture[..picture.find('.').unwrap()]);
         assert!(std::fs::metadata(dir.join(picture)).unwrap().len() > 1000, "{picture}");
     }
+    // Fig. 3's records keep their runs' curves: the figure redraws from the results
+    // file alone, where no run folder is.
+    for r in results(&root.join("fig3")) {
+        assert!(r["curve"]["points"].as_array().is_some_and(|p| !p.is_empty()), "{r}");
+    }
+    let scratch = tempfile::tempdir().unwrap();
+    let kept = scratch.path().join("results.jsonl");
+    std::fs::copy(root.join("fig3").join("results.jsonl"), &kept).unwrap();
+    let png = scratch.path().join("fig3.png");
+    ok(&schrl(&["plot", "curves", "--results", kept.to_str().unwrap(), "--out", png.to_str().unwrap()]));
+    assert!(std::fs::metadata(&png).unwrap().len() > 1000);
 }
 
 /// Table 1 (Doggo) needs MuJoCo: CI runs it with `--features mujoco`.

@@ -12,7 +12,7 @@ use crate::experiment::record::{self, Record};
 use crate::experiment::runner::{self, Identity};
 use crate::experiment::{Experiment, Selection, catalog, cluster, parse_seeds};
 
-use super::plot::{BarRow, CurveRun, save_bar_chart, save_curves};
+use super::plot::{BarRow, CurveRun, CurveSource, save_bar_chart, save_curves};
 
 /// Arguments of `schrl experiment`.
 #[derive(clap::Args, Debug)]
@@ -132,6 +132,12 @@ pub fn run(args: Args) -> Result<()> {
         return Err(err);
     }
     bar.finish_and_clear();
+    if e == Experiment::Fig3 {
+        let filled = record::fill_curves(&dir)?;
+        if filled > 0 {
+            println!("kept the curves of {filled} earlier records (written before records kept them)");
+        }
+    }
     let records = record::merge(&dir)?;
     let finished = cells.iter().filter(|c| records.iter().any(|r| r.id == c.id())).count();
     println!(
@@ -177,7 +183,10 @@ pub fn plots(e: Experiment, dir: &std::path::Path, records: &[Record]) -> Result
                 .map(|r| CurveRun {
                     task: r.task.clone(),
                     method: r.method.clone(),
-                    dir: dir.join("cells").join(&r.id).join("run"),
+                    source: match &r.curve {
+                        Some(c) => CurveSource::Recorded(c.clone()),
+                        None => CurveSource::Run(record::fig3_run(dir, &r.id)),
+                    },
                 })
                 .collect();
             for ext in ["png", "svg"] {

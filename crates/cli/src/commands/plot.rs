@@ -22,8 +22,13 @@ pub enum Command {
 pub struct CurvesArgs {
     /// A run as TASK:METHOD:DIR, DIR a run directory of `schrl train` or `schrl
     /// baseline train`; repeat once per run (runs of one task and method are its seeds).
-    #[arg(long = "run", required = true, value_name = "TASK:METHOD:DIR")]
+    #[arg(long = "run", value_name = "TASK:METHOD:DIR", required_unless_present = "results")]
     runs: Vec<String>,
+    /// A `results.jsonl` of `schrl experiment fig3`: every record in it that carries its
+    /// run's curve is a run (task and method from the record), so the figure needs no
+    /// run directory; repeatable, and may be combined with `--run`.
+    #[arg(long, value_name = "FILE")]
+    results: Vec<PathBuf>,
     /// Points along the x axis: each is the mean score of a run's iterations in a bin
     /// of environment steps.
     #[arg(long, default_value_t = 40, value_parser = super::count::<2, 1000>)]
@@ -186,10 +191,42 @@ pub fn save_bar_chart(rows: &[BarRow], out: &Path, force: bool) -> Result<()> {
 /// One run's spec scores: `(environment steps, score)` in order, and whether the run
 /// may have stopped early at its target (`schrl train`'s runs), so its last value holds
 /// to the end.
-pub(crate) struct Curve {
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Curve {
     /// `(environment steps, score)`, in order.
-    pub(crate) points: Vec<(f64, f64)>,
-    holds: bool,
+    pub points: Vec<(f64, f64)>,
+    /// Whether the last score holds to the end of the x axis.
+    pub holds: bool,
+}
+
+impl Curve {
+    /// The curve in at most `bins` points: the mean score of the points in each of
+    /// `bins` equal bins of `0..=last step`, placed at the bin's right edge (empty bins
+    /// give none), so the last point stays at the run's last step. A run logs a score
+    /// every iteration (thousands over a baseline's budget); drawn in a number of bins
+    /// that divides `bins`, over the same steps, each drawn bin holds whole thinned
+    /// bins, and its value is their mean.
+    pub fn thinned(&self, bins: usize) -> Curve {
+        let Some(&(end, _)) = self.points.last() else { return self.clone() };
+        if self.points.len() <= bins || end <= 0.0 {
+            return self.clone();
+        }
+        let mut sums = vec![(0.0, 0usize); bins];
+        for &(x, y) in &self.points {
+            // Bin k holds (end·k/bins, end·(k+1)/bins], as `binned` draws them.
+            let k = ((x * bins as f64 / end).ceil() as usize).clamp(1, bins) - 1;
+            sums[k] = (sums[k].0 + y, sums[k].1 + 1);
+        }
+        let edge = |k: usize| if k + 1 == bins { end } else { end * (k + 1) as f64 / bins as f64 };
+        let points = sums
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.1 > 0)
+            .map(|(k, &(y, n))| (edge(k), y / n as f64))
+            .collect();
+        Curve { points, holds: self.holds }
+    }
 }
 
 /// The spec scores of the run in `dir` (none for a run logged before scores were).
@@ -270,7 +307,36 @@ fn curves(args: CurvesArgs) -> Result<()> {
         let (Some(task), Some(method), Some(dir)) = (parts.next(), parts.next(), parts.next()) else {
             bail!("--run {spec}: expected TASK:METHOD:DIR");
         };
-        runs.push(CurveRun { task: task.into(), method: method.into(), dir: dir.into() });
+        runs.push(CurveRun {
+            task: task.into(),
+            method: method.into(),
+            source: CurveSource::Run(dir.into()),
+        });
+    }
+    for path in &args.results {
+        let records = crate::experiment::record::read_results(path)?;
+        let before = runs.len();
+        let mut without = 0;
+        for r in records {
+            match r.curve {
+                Some(curve) => runs.push(CurveRun {
+                    task: r.task,
+                    method: r.method,
+                    source: CurveSource::Recorded(curve),
+                }),
+                None => without += 1,
+            }
+        }
+        if runs.len() == before {
+            bail!(
+                "{}: no record carries its run's curve (records written before curves were kept \
+                 have none); draw those runs from their directories with --run TASK:METHOD:DIR",
+                path.display()
+            );
+        }
+        if without > 0 {
+            eprintln!("{}: {without} records without a curve left out", path.display());
+        }
     }
     save_curves(&runs, args.bins, &args.out, args.force)?;
     println!("wrote {}", args.out.display());
@@ -284,8 +350,17 @@ pub struct CurveRun {
     pub task: String,
     /// Method (a line; its runs are its seeds).
     pub method: String,
-    /// Run directory of `schrl train` or `schrl baseline train`.
-    pub dir: PathBuf,
+    /// Where its scores come from.
+    pub source: CurveSource,
+}
+
+/// Where a run's spec scores are read.
+#[derive(Clone, Debug)]
+pub enum CurveSource {
+    /// Its run directory of `schrl train` or `schrl baseline train` (`metrics.jsonl`).
+    Run(PathBuf),
+    /// Its experiment record's copy ([`crate::experiment::record::Record::curve`]).
+    Recorded(Curve),
 }
 
 /// The spec score of training runs against environment steps, in `bins` points, mean
@@ -295,14 +370,23 @@ pub fn save_curves(runs: &[CurveRun], bins: usize, out: &Path, force: bool) -> R
     sim::render::check_target(out, force)?;
     // (task, method) in the order given, each with its runs' points.
     let mut cells: Vec<((String, String), Vec<Curve>)> = vec![];
-    for CurveRun { task, method, dir } in runs {
-        let points = scores(dir)?;
-        if points.points.is_empty() {
-            bail!(
-                "{}: no spec scores (runs trained before the score was logged have none)",
-                dir.join("metrics.jsonl").display()
-            );
-        }
+    for CurveRun { task, method, source } in runs {
+        let points = match source {
+            CurveSource::Run(dir) => {
+                let points = scores(dir)?;
+                if points.points.is_empty() {
+                    bail!(
+                        "{}: no spec scores (runs trained before the score was logged have none)",
+                        dir.join("metrics.jsonl").display()
+                    );
+                }
+                points
+            }
+            CurveSource::Recorded(curve) if curve.points.is_empty() => {
+                bail!("the recorded curve of a {task} {method} run has no points")
+            }
+            CurveSource::Recorded(curve) => curve.clone(),
+        };
         let key = (task.to_string(), method.to_string());
         match cells.iter_mut().find(|(k, _)| *k == key) {
             Some((_, runs)) => runs.push(points),
@@ -366,4 +450,27 @@ pub fn save_curves(runs: &[CurveRun], bins: usize, out: &Path, force: bool) -> R
         .collect();
     sim::render::save_chart(&panels, "environment steps", out, force)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A record keeps 200 of a run's 4000 scores; the 40 bins of a figure drawn from
+    /// them are the ones drawn from every score.
+    #[test]
+    fn a_thinned_curve_draws_the_same_bins_as_the_whole_one() {
+        let points: Vec<(f64, f64)> =
+            (1..=4000).map(|i| (1000.0 * i as f64, ((i * 7919) % 101) as f64 / 10.0 - 5.0)).collect();
+        let whole = Curve { points, holds: false };
+        let thin = whole.thinned(200);
+        assert_eq!(thin.points.len(), 200);
+        assert_eq!(thin.points.last().unwrap().0, 4.0e6, "the last point stays at the run's last step");
+        let (a, b) = (binned(&whole, 4.0e6, 40), binned(&thin, 4.0e6, 40));
+        for (k, (a, b)) in a.iter().zip(&b).enumerate() {
+            assert!((a.unwrap() - b.unwrap()).abs() < 1e-9, "bin {k}: {a:?} vs {b:?}");
+        }
+        let short = Curve { points: whole.points[..150].to_vec(), holds: true };
+        assert_eq!(short.thinned(200), short, "a curve already short enough is kept");
+    }
 }

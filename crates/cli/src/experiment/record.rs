@@ -7,6 +7,8 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::commands::plot::Curve;
+
 /// What a finished cell measured, and how.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Record {
@@ -34,6 +36,46 @@ pub struct Record {
     pub commit: String,
     /// Wall-clock seconds of the cell's steps in the invocation that finished it.
     pub seconds: f64,
+    /// Fig. 3's cells: the run's spec score against environment steps, thinned to
+    /// [`CURVE_POINTS`], so the figure can be redrawn from the records alone (`schrl
+    /// plot curves --results`) once the runs' folders are gone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub curve: Option<Curve>,
+}
+
+/// Points a record keeps of its run's curve: 200, which figures of 40, 50 or 100 bins
+/// divide.
+pub const CURVE_POINTS: usize = 200;
+
+/// A run's curve as a record keeps it; `None` when the run logged no score.
+pub fn recorded_curve(run: &Path) -> Result<Option<Curve>> {
+    let curve = crate::commands::plot::scores(run)?;
+    Ok((!curve.points.is_empty()).then(|| curve.thinned(CURVE_POINTS)))
+}
+
+/// The run folder of Fig. 3's cell `id` in the experiment folder `dir` (each of its
+/// cells trains one run, `run`).
+pub fn fig3_run(dir: &Path, id: &str) -> std::path::PathBuf {
+    dir.join("cells").join(id).join("run")
+}
+
+/// Gives every Fig. 3 record under `dir/cells/` that has no curve its run's, where the
+/// run's folder still holds one (records written before curves were kept); returns how
+/// many it filled.
+pub fn fill_curves(dir: &Path) -> Result<usize> {
+    let mut filled = 0;
+    for mut r in all(dir)? {
+        let run = fig3_run(dir, &r.id);
+        if r.experiment != "fig3" || r.curve.is_some() || !run.join("metrics.jsonl").exists() {
+            continue;
+        }
+        r.curve = recorded_curve(&run)?;
+        if r.curve.is_some() {
+            write(&dir.join("cells").join(&r.id), &r)?;
+            filled += 1;
+        }
+    }
+    Ok(filled)
 }
 
 /// The numbers a command printed: every line `name: value` or `name: mean ± std`
@@ -223,6 +265,28 @@ mod tests {
         }
         let ids: Vec<String> = merge(&dir).unwrap().into_iter().map(|r| r.id).collect();
         assert_eq!(ids, ["point-seq-tltl-0", "point-signal-schrl-0", "point-signal-htltl-0"]);
+    }
+
+    #[test]
+    fn records_written_before_curves_were_kept_get_their_runs_curves() {
+        let scratch = tempfile::tempdir().unwrap();
+        let dir = scratch.path();
+        let old = crate::report::tests::record("fig3", "seq", "crm", 0, &[]);
+        let (cell, run) = (dir.join("cells").join(&old.id), fig3_run(dir, &old.id));
+        std::fs::create_dir_all(&run).unwrap();
+        write(&cell, &old).unwrap();
+        std::fs::write(run.join(schrl::store::MANIFEST), r#"{"kind":"crm"}"#).unwrap();
+        let lines =
+            "{\"env_steps\":1000,\"score\":-2.0}\n{\"env_steps\":1500}\n{\"env_steps\":2000,\"score\":1.0}\n";
+        std::fs::write(run.join("metrics.jsonl"), lines).unwrap();
+        assert_eq!(fill_curves(dir).unwrap(), 1);
+        let curve = read(&cell).unwrap().unwrap().curve.expect("filled");
+        assert_eq!(curve.points, [(1000.0, -2.0), (2000.0, 1.0)]);
+        assert_eq!(fill_curves(dir).unwrap(), 0, "a record with a curve keeps it");
+        // The merged results carry it once the run's folder is gone.
+        merge(dir).unwrap();
+        std::fs::remove_dir_all(&run).unwrap();
+        assert_eq!(read_results(&dir.join(RESULTS)).unwrap()[0].curve, Some(curve));
     }
 
     #[test]

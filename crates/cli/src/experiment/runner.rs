@@ -114,6 +114,7 @@ pub fn run_cell(
     let start = Instant::now();
     let mut rows = std::collections::BTreeMap::new();
     let mut commands = Vec::new();
+    let mut curve = None;
     for (k, step) in cell.steps.iter().enumerate() {
         let args = arguments(step, &cdir, false);
         let typed = shell_words("schrl", &arguments(step, &cdir, true));
@@ -157,6 +158,7 @@ pub fn run_cell(
                 && let Some(score) = record::final_score(&cdir.join(run), FINAL_SCORE_WINDOW)?
             {
                 metrics.insert("final score".into(), score);
+                curve = record::recorded_curve(&cdir.join(run))?;
             }
             // Steps may share a row (Table 5 times its planners in two commands).
             rows.entry(row.clone()).or_insert_with(std::collections::BTreeMap::new).extend(metrics);
@@ -181,6 +183,7 @@ pub fn run_cell(
         commands,
         commit: COMMIT.into(),
         seconds: start.elapsed().as_secs_f64(),
+        curve,
     };
     record::write(&cdir, &record)?;
     Ok(record)

@@ -232,6 +232,7 @@ pub(crate) mod tests {
             commands: vec![format!("schrl train --task {task} --seed {seed}")],
             commit: "abc".into(),
             seconds: 1.0,
+            curve: None,
         }
     }
 
