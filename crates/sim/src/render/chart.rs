@@ -41,12 +41,12 @@ impl Series {
 pub struct ChartPanel {
     /// The lines, drawn in the palette's colours (orange, blue, green, grey, yellow).
     pub series: Vec<Series>,
-    /// Fixed y range, e.g. `(0, 1)` for rates; `None`: the data's.
+    /// Fixed y range, e.g. `(0, 1)` for rates; `None`: the data's, and the reference's.
     pub y_range: Option<(f64, f64)>,
     /// The y axis's title.
     pub y_label: String,
     /// A dashed black line across the panel at this y, under the series (e.g. 0 for a
-    /// score whose sign is a verdict); `None`: none.
+    /// score whose sign is a verdict), drawn where it is in range; `None`: none.
     pub reference: Option<f64>,
 }
 
@@ -89,6 +89,20 @@ fn legend(entries: impl Iterator<Item = (String, RGBColor)>, mark: Mark) -> Vec<
     entries.map(|(label, color)| LegendEntry { label, color, mark }).collect()
 }
 
+/// A panel's y range: its fixed one, or its lines' and bands' values and its
+/// reference line's. With the reference out of range, plotters would clip the line
+/// onto the frame, where it reads as if the curves reached it.
+fn y_extent(panel: &ChartPanel) -> (f64, f64) {
+    if let Some(range) = panel.y_range {
+        return range;
+    }
+    let values = panel
+        .series
+        .iter()
+        .flat_map(|s| s.points.iter().map(|p| p.1).chain(s.band.iter().flat_map(|b| [b.1, b.2])));
+    extent(values.chain(panel.reference.filter(|y| y.is_finite())))
+}
+
 fn draw_chart<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     panels: &[ChartPanel],
@@ -104,12 +118,9 @@ where
         let (top, plot) = area.split_vertically(LEGEND_HEIGHT);
         let entries = panel.series.iter().enumerate().map(|(i, s)| (s.label.clone(), s.color(i)));
         draw_legend(&top, &legend(entries, Mark::Line))?;
-        let pts = || panel.series.iter().flat_map(|s| s.points.iter());
-        let band = || panel.series.iter().flat_map(|s| s.band.iter());
-        let (x0, x1) = extent(pts().map(|p| p.0));
-        let (y0, y1) = panel
-            .y_range
-            .unwrap_or_else(|| extent(pts().map(|p| p.1).chain(band().flat_map(|b| [b.1, b.2]))));
+        let (x0, x1) = extent(panel.series.iter().flat_map(|s| s.points.iter().map(|p| p.0)));
+        let reference = panel.reference.filter(|y| y.is_finite());
+        let (y0, y1) = y_extent(panel);
         let pad = 0.05 * (y1 - y0);
         let mut chart = ChartBuilder::on(&plot)
             .margin_left(12)
@@ -120,7 +131,7 @@ where
             .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
             .map_err(err)?;
         axes(&mut chart, x_label, &panel.y_label).draw().map_err(err)?;
-        if let Some(y) = panel.reference.filter(|y| y.is_finite()) {
+        if let Some(y) = reference.filter(|y| (y0 - pad..=y1 + pad).contains(y)) {
             let line =
                 plotters::element::DashedPathElement::new([(x0, y), (x1, y)], 6, 4, BLACK.stroke_width(1));
             chart.draw_series(std::iter::once(line)).map_err(err)?;
@@ -254,4 +265,28 @@ where
         }
     }
     root.present().map_err(err)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// CRM's Fig. 3 panel (scores −4.1 to −3.3, a reference at 0) drew its dashed line
+    /// on the top of the frame, as if the curves reached 0.
+    #[test]
+    fn a_reference_out_of_the_datas_range_stretches_the_axis_to_it() {
+        let series = Series {
+            label: "crm".into(),
+            points: vec![(1.0, -4.1), (2.0, -3.3)],
+            band: vec![],
+            colour: None,
+        };
+        let mut panel =
+            ChartPanel { series: vec![series], y_range: None, y_label: "score".into(), reference: Some(0.0) };
+        assert_eq!(y_extent(&panel), (-4.1, 0.0));
+        panel.reference = None;
+        assert_eq!(y_extent(&panel), (-4.1, -3.3));
+        panel.y_range = Some((-5.0, 1.0));
+        assert_eq!(y_extent(&panel), (-5.0, 1.0), "a fixed range is kept");
+    }
 }
