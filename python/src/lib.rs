@@ -1,8 +1,8 @@
 //! `schrl._schrl`: the native module under the `schrl` Python package.
 //!
-//! [`spec`] backs `schrl.stl` (robustness on NumPy arrays); [`envs`] backs
-//! `schrl.envs` (the robots as Gymnasium environments, single and vectorised); [`run`]
-//! backs `schrl.load_planner` and `schrl.evaluate` (trained runs); [`train`] backs
+//! `spec` backs `schrl.stl` (robustness on NumPy arrays); `envs` backs
+//! `schrl.envs` (the robots as Gymnasium environments, single and vectorised); `run`
+//! backs `schrl.load_planner` and `schrl.evaluate` (trained runs); `train` backs
 //! `schrl.train`.
 
 use pyo3::prelude::*;

@@ -1,7 +1,7 @@
 //! Native robot simulation for schrl: the robots, maps, and goal-conditioned
 //! environments of the paper's experiments (§4.1, App. G), plus rendering.
 //!
-//! * [`env`] — the [`Env`] trait (Gymnasium-shaped, goal-conditioned), the reward and
+//! * [`env`](mod@env) — the [`Env`] trait (Gymnasium-shaped, goal-conditioned), the reward and
 //!   reach logic ([`GoalEnv`]), spaces and errors.
 //! * [`robots`] — [`Point`], [`Car`] and [`Drone`]: hand-written equations of motion,
 //!   each parameter documented with its source.

@@ -89,7 +89,7 @@ pub struct TrainArgs {
     #[arg(long)]
     gamma: Option<f64>,
     /// The reward machine (crm, dhrm): a machine file [default: the task's shipped machine,
-    /// tasks/machines/<task>.toml].
+    /// tasks/machines/TASK.toml].
     #[arg(long)]
     machine: Option<PathBuf>,
 }

@@ -276,7 +276,7 @@ pub struct TrainArgs {
     /// cpg (constrained policy gradient) or pg (policy gradient only) [default: cpg].
     #[arg(long, value_parser = parse_method)]
     method: Option<Method>,
-    /// Semantics of the spec in the loss: hard, soft:<alpha> or lse:<temperature>, a
+    /// Semantics of the spec in the loss: hard, soft:ALPHA or lse:TEMPERATURE, a
     /// smooth one with ,until=flat|recursive [default: soft:10,until=flat].
     #[arg(long)]
     semantics: Option<Semantics>,

@@ -29,8 +29,8 @@ pub struct Args {
     /// each run's robustness and verdict, and fails if any differs from the record.
     #[arg(long, requires = "task")]
     runs: Option<PathBuf>,
-    /// Semantics: hard, soft:<alpha> (the paper's softmax-weighted mean) or
-    /// lse:<temperature> (log-sum-exp); a smooth one may add ,until=recursive (the
+    /// Semantics: hard, soft:ALPHA (the paper's softmax-weighted mean) or
+    /// lse:TEMPERATURE (log-sum-exp); a smooth one may add ,until=recursive (the
     /// default, O(T)) or ,until=flat (the definition smoothed as written, O(T·w)).
     #[arg(long, default_value = "hard")]
     semantics: Semantics,

@@ -44,8 +44,8 @@ pub struct TrainArgs {
     /// general controller first, into DIR/general).
     #[arg(long)]
     controller: Option<PathBuf>,
-    /// Semantics of the spec in the planner's loss: hard, soft:<alpha> or
-    /// lse:<temperature>, a smooth one with ,until=flat|recursive
+    /// Semantics of the spec in the planner's loss: hard, soft:ALPHA or
+    /// lse:TEMPERATURE, a smooth one with ,until=flat|recursive
     /// [default: soft:10,until=flat].
     #[arg(long)]
     semantics: Option<Semantics>,

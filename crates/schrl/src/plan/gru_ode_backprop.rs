@@ -122,7 +122,8 @@ struct Work {
 pub struct GruOdeBackprop {
     cfg: PlannerConfig,
     at: Offsets,
-    /// Parameters, in [`layout`] order.
+    /// Parameters, flat: the GRU's input and hidden weights and biases, then the mean
+    /// and spread heads' (the order of the `VarMap` names it is read from).
     pub params: Vec<f32>,
     work: Work,
 }

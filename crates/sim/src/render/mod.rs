@@ -48,7 +48,7 @@ pub enum PathKind {
     /// Where the robot went.
     Executed,
     /// Waypoints from another planner, drawn beside [`PathKind::Planned`] for
-    /// comparison (named by [`Scene::compared_label`]).
+    /// comparison (named by [`PathLabels::compared`]).
     Compared,
 }
 

@@ -4,11 +4,11 @@
 //!
 //! * Variables: waypoints `1..=T` (the start is given), inside the map's plan region,
 //!   each step at most [`MipConfig::max_step`] per coordinate.
-//! * Predicates: piecewise-linear lower bounds ([`geometry`]): goal discs as inscribed
+//! * Predicates: piecewise-linear lower bounds (module `geometry`): goal discs as inscribed
 //!   polygons, staying outside a disc as tangent half-planes, walls as a disjunction
 //!   of each box's sides, at waypoints or along segments as the task checks `safe`
 //!   and its avoid regions. So `ρ̃ ≤ ρ`: a plan with `ρ̃ > 0` satisfies the spec.
-//! * Logic and time: big-M over waypoint indices ([`encode`]), negation pushed down.
+//! * Logic and time: big-M over waypoint indices (module `encode`), negation pushed down.
 //! * Objective, in two stages: maximise `ρ̃`; then, with the binaries of that optimum
 //!   fixed, minimise the plan's 1-norm length subject to `ρ̃` staying at the optimum (a
 //!   linear program). Robustness first, not the shortest path subject to `ρ ≥ ε`; the
