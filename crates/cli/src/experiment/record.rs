@@ -48,9 +48,8 @@ pub struct Record {
 pub const CURVE_POINTS: usize = 200;
 
 /// A run's curve as a record keeps it; `None` when the run logged no score.
-pub fn recorded_curve(run: &Path) -> Result<Option<Curve>> {
-    let curve = crate::commands::plot::scores(run)?;
-    Ok((!curve.points.is_empty()).then(|| curve.thinned(CURVE_POINTS)))
+pub fn recorded_curve(curve: &Curve) -> Option<Curve> {
+    (!curve.points.is_empty()).then(|| curve.thinned(CURVE_POINTS))
 }
 
 /// The run folder of Fig. 3's cell `id` in the experiment folder `dir` (each of its
@@ -66,10 +65,13 @@ pub fn fill_curves(dir: &Path) -> Result<usize> {
     let mut filled = 0;
     for mut r in all(dir)? {
         let run = fig3_run(dir, &r.id);
-        if r.experiment != "fig3" || r.curve.is_some() || !run.join("metrics.jsonl").exists() {
+        if r.experiment != super::Experiment::Fig3.name()
+            || r.curve.is_some()
+            || !run.join("metrics.jsonl").exists()
+        {
             continue;
         }
-        r.curve = recorded_curve(&run)?;
+        r.curve = recorded_curve(&crate::commands::plot::scores(&run)?);
         if r.curve.is_some() {
             write(&dir.join("cells").join(&r.id), &r)?;
             filled += 1;
@@ -108,13 +110,13 @@ pub fn metrics_of(output: &str) -> BTreeMap<String, f64> {
 }
 
 /// The mean spec score of a run's training episodes logged in its last `window`
-/// environment steps (the points `schrl plot curves` draws): where a training curve
-/// ends. `None` when the log has no scores.
-pub fn final_score(run: &Path, window: f64) -> Result<Option<f64>> {
-    let points = crate::commands::plot::scores(run)?.points;
-    let Some(&(last, _)) = points.last() else { return Ok(None) };
+/// environment steps (its curve's, [`crate::commands::plot::scores`]): where a training
+/// curve ends. `None` when the log has no scores.
+pub fn final_score(curve: &Curve, window: f64) -> Option<f64> {
+    let points = &curve.points;
+    let &(last, _) = points.last()?;
     let tail: Vec<f64> = points.iter().filter(|(s, _)| *s > last - window).map(|(_, v)| *v).collect();
-    Ok(Some(tail.iter().sum::<f64>() / tail.len() as f64))
+    Some(tail.iter().sum::<f64>() / tail.len() as f64)
 }
 
 /// Success over the last 100 settled goals at which a controller run counts as
@@ -344,8 +346,9 @@ mod tests {
             .map(|(s, v)| format!("{{\"env_steps\":{s},\"score\":{v}}}"))
             .join("\n");
         std::fs::write(dir.join("metrics.jsonl"), lines + "\n{\"env_steps\":260000}\n").unwrap();
-        assert_eq!(final_score(dir, 100_000.0).unwrap(), Some(1.5));
+        let score = |dir| final_score(&crate::commands::plot::scores(dir).unwrap(), 100_000.0);
+        assert_eq!(score(dir), Some(1.5));
         std::fs::write(dir.join("metrics.jsonl"), "{\"env_steps\":1}\n").unwrap();
-        assert_eq!(final_score(dir, 100_000.0).unwrap(), None);
+        assert_eq!(score(dir), None);
     }
 }
