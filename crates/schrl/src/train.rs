@@ -322,6 +322,13 @@ fn first_checkpoint(
                 s.joint.safe_margin
             ));
         }
+        if k.guided {
+            watcher.note(&format!(
+                "planner: no candidate found the task; kept the guided one, fitted to the gradient \
+                 planner's plans from {} starts",
+                crate::plan::pretrain::GUIDE.starts
+            ));
+        }
         watcher.note(&format!(
             "planner: kept mean paths satisfying from {:.3} of starts, {:.2} m long",
             k.satisfaction, k.length

@@ -366,6 +366,60 @@ fn gradient_planner_finds_drone_loops_bounce_by_drawing_at_goal_centres() {
     assert!("centres".parse::<WaypointDraw>().unwrap_err().contains("region or goal-centres"));
 }
 
+/// A plan refined for a nearby start keeps its shape (the guide's per-start plans):
+/// Point Seq's plan from one corner of the start region, refined from the other,
+/// satisfies with every planned waypoint within a metre of where it was, where a fresh
+/// search from there may visit the goals another way.
+#[test]
+fn gradient_planner_refines_a_plan_for_another_start_keeping_its_shape() {
+    use rand::SeedableRng;
+    use schrl::plan::gradient_planner::{GradientPlannerConfig, plan, refine};
+    let task = Task::point(TaskKind::Seq);
+    let spec = task.spec();
+    let cfg = GradientPlannerConfig::default();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    let (lo, hi) = task.start.clone();
+    let first = plan(&task, &spec, &lo, &cfg, &mut rng).unwrap();
+    assert!(first.satisfied());
+    let mut moved = first.path.clone();
+    moved[..lo.len()].copy_from_slice(&hi);
+    let refined =
+        refine(&task, &spec, moved, &GradientPlannerConfig { repair_every: 0, ..cfg }, &mut rng).unwrap();
+    assert!(refined.satisfied(), "refined plan robustness {}", refined.robustness);
+    assert_eq!((refined.attempts, &refined.path[..hi.len()]), (1, &hi[..]), "one attempt from the new start");
+    let far = refined
+        .path
+        .chunks(2)
+        .zip(first.path.chunks(2))
+        .skip(1)
+        .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
+        .fold(0.0, f64::max);
+    assert!(far < 1.0, "a waypoint moved {far} m");
+}
+
+/// Fitting the planner's mean paths to given paths brings them there, and says what is
+/// wrong with targets of the wrong size.
+#[test]
+fn planner_mean_paths_fit_given_paths() {
+    let task = Task::point(TaskKind::Seq);
+    let mut t = PlanTrainer::new(task.clone(), CpgConfig::default()).unwrap();
+    let (steps, n) = (task.steps, 8);
+    let starts: Vec<f32> = (0..n).flat_map(|k| [1.0 + 0.1 * k as f32, -1.5]).collect();
+    // Each path a straight line from its start towards (−2, 2), 0.4 m a waypoint.
+    let mut targets = vec![];
+    for s in starts.chunks(2) {
+        for i in 0..=steps {
+            let f = (0.4 * i as f32 / 5.0).min(1.0);
+            targets.extend([s[0] + f * (-2.0 - s[0]), s[1] + f * (2.0 - s[1])]);
+        }
+    }
+    let before = t.fit_mean_paths(&starts, &targets, 0, 3e-3).unwrap();
+    let after = t.fit_mean_paths(&starts, &targets, 1500, 3e-3).unwrap();
+    assert!(after < 0.2 && after < before / 5.0, "rms {before} m before, {after} m after");
+    let err = t.fit_mean_paths(&starts, &targets[2..], 1, 3e-3).unwrap_err().to_string();
+    assert!(err.contains("target numbers"), "{err}");
+}
+
 /// The Fig. 6 ablation planners (plain GRU, MLP) sample, score and train like the
 /// GRU-ODE; the MLP has no memory, so its step depends on the current waypoint only.
 #[test]

@@ -169,13 +169,10 @@ pub fn plan(
 ) -> Result<GradientPlan, EvalError> {
     let dim = task.map.dim();
     let n = (task.steps + 1) * dim;
-    let (lo, hi) = task.map.region();
     let hard = Semantics::hard();
-    let (b1, b2) = (0.9f64, 0.999f64);
     let mut best: Option<GradientPlan> = None;
     let mut total = 0;
     let mut ev = spec.evaluator();
-    let mut grad = vec![0.0; n];
     for attempt in 1..=cfg.restarts.max(1) {
         // Every waypoint drawn, the start too (then given): the random stream of
         // region draws is the one this planner has always used.
@@ -184,50 +181,10 @@ pub fn plan(
             draw_waypoint(task, cfg.draw, w, rng);
         }
         path[..dim].copy_from_slice(start);
-        let (mut m, mut v) = (vec![0.0; n], vec![0.0; n]);
-        // The most robust satisfying plan of this attempt, once there is one.
-        let mut satisfying: Option<GradientPlan> = None;
-        for it in 1..=cfg.iterations {
-            total += 1;
-            grad.iter_mut().for_each(|g| *g = 0.0);
-            ev.gradient(&path, 0, &cfg.semantics, &mut grad)?;
-            let (c1, c2) = (1.0 - b1.powi(it as i32), 1.0 - b2.powi(it as i32));
-            for i in dim..n {
-                m[i] = b1 * m[i] + (1.0 - b1) * grad[i];
-                v[i] = b2 * v[i] + (1.0 - b2) * grad[i] * grad[i];
-                path[i] += cfg.lr * (m[i] / c1) / ((v[i] / c2).sqrt() + 1e-8);
-                if cfg.in_region {
-                    path[i] = path[i].clamp(lo[i % dim], hi[i % dim]);
-                }
-            }
-            let repair = cfg.repair_every > 0
-                && it % cfg.repair_every == 0
-                && it < cfg.iterations
-                && satisfying.is_none();
-            // The hard check every 10 steps (and before a repair): it costs as much as a gradient.
-            if it % 10 == 0 || repair {
-                let rho = ev.robustness(&path, &hard)?;
-                if rho > 0.0 && satisfying.as_ref().is_none_or(|s| rho > s.robustness) {
-                    satisfying = Some(GradientPlan {
-                        path: path.clone(),
-                        robustness: rho,
-                        attempts: attempt,
-                        iterations: total,
-                    });
-                }
-                if rho >= cfg.target && rho > 0.0 {
-                    break;
-                }
-                if repair && rho <= 0.0 {
-                    redraw_a_binding_waypoint(&mut ev, &mut path, task, cfg.draw, rng, &mut grad)?;
-                    for k in (0..n).filter(|&k| grad[k] != 0.0) {
-                        (m[k], v[k]) = (0.0, 0.0);
-                    }
-                }
-            }
-        }
-        if let Some(mut s) = satisfying {
-            s.iterations = total;
+        let (found, steps) = ascend(task, &mut ev, &mut path, cfg, rng)?;
+        total += steps;
+        if let Some(mut s) = found {
+            (s.attempts, s.iterations) = (attempt, total);
             return Ok(s);
         }
         let rho = ev.robustness(&path, &hard)?;
@@ -239,6 +196,85 @@ pub fn plan(
     best.attempts = cfg.restarts.max(1);
     best.iterations = total;
     Ok(best)
+}
+
+/// One attempt of [`plan`] from `path` as given (`(steps + 1) · dim` numbers, the
+/// start first and kept): ascent, repairs and the target as `cfg` says. Returns the
+/// most robust satisfying plan seen, else the attempt's last path (robustness
+/// ≤ 0), with `attempts` 1. A plan for one start refined into a plan for a nearby
+/// start keeps its shape (which goals it visits in which order) where a fresh search
+/// may find another: the per-start plans a planner network can be fitted to
+/// ([`crate::plan::pretrain`]'s guide).
+pub fn refine(
+    task: &Task,
+    spec: &Spec,
+    mut path: Vec<f64>,
+    cfg: &GradientPlannerConfig,
+    rng: &mut ChaCha8Rng,
+) -> Result<GradientPlan, EvalError> {
+    let mut ev = spec.evaluator();
+    let (found, iterations) = ascend(task, &mut ev, &mut path, cfg, rng)?;
+    if let Some(mut s) = found {
+        s.iterations = iterations;
+        return Ok(s);
+    }
+    let robustness = ev.robustness(&path, &Semantics::hard())?;
+    Ok(GradientPlan { path, robustness, attempts: 1, iterations })
+}
+
+/// Adam ascent of `path`'s soft robustness for at most `cfg.iterations` steps, the
+/// start fixed. Returns the most robust satisfying plan seen (`attempts` 1) and the
+/// steps taken; `path` is left where ascent stopped.
+fn ascend(
+    task: &Task,
+    ev: &mut Evaluator<'_>,
+    path: &mut [f64],
+    cfg: &GradientPlannerConfig,
+    rng: &mut ChaCha8Rng,
+) -> Result<(Option<GradientPlan>, usize), EvalError> {
+    let dim = task.map.dim();
+    let n = path.len();
+    let (lo, hi) = task.map.region();
+    let hard = Semantics::hard();
+    let (b1, b2) = (0.9f64, 0.999f64);
+    let mut grad = vec![0.0; n];
+    let (mut m, mut v) = (vec![0.0; n], vec![0.0; n]);
+    let mut satisfying: Option<GradientPlan> = None;
+    let mut steps = 0;
+    for it in 1..=cfg.iterations {
+        steps = it;
+        grad.iter_mut().for_each(|g| *g = 0.0);
+        ev.gradient(path, 0, &cfg.semantics, &mut grad)?;
+        let (c1, c2) = (1.0 - b1.powi(it as i32), 1.0 - b2.powi(it as i32));
+        for i in dim..n {
+            m[i] = b1 * m[i] + (1.0 - b1) * grad[i];
+            v[i] = b2 * v[i] + (1.0 - b2) * grad[i] * grad[i];
+            path[i] += cfg.lr * (m[i] / c1) / ((v[i] / c2).sqrt() + 1e-8);
+            if cfg.in_region {
+                path[i] = path[i].clamp(lo[i % dim], hi[i % dim]);
+            }
+        }
+        let repair =
+            cfg.repair_every > 0 && it % cfg.repair_every == 0 && it < cfg.iterations && satisfying.is_none();
+        // The hard check every 10 steps (and before a repair): it costs as much as a gradient.
+        if it % 10 == 0 || repair {
+            let rho = ev.robustness(path, &hard)?;
+            if rho > 0.0 && satisfying.as_ref().is_none_or(|s| rho > s.robustness) {
+                satisfying =
+                    Some(GradientPlan { path: path.to_vec(), robustness: rho, attempts: 1, iterations: it });
+            }
+            if rho >= cfg.target && rho > 0.0 {
+                break;
+            }
+            if repair && rho <= 0.0 {
+                redraw_a_binding_waypoint(ev, path, task, cfg.draw, rng, &mut grad)?;
+                for k in (0..n).filter(|&k| grad[k] != 0.0) {
+                    (m[k], v[k]) = (0.0, 0.0);
+                }
+            }
+        }
+    }
+    Ok((satisfying, steps))
 }
 
 /// Draws one waypoint `w` (`dim` numbers) as `draw` says.
