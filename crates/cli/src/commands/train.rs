@@ -82,6 +82,10 @@ pub struct TrainArgs {
     /// [default: 4].
     #[arg(long)]
     pretrain_horizon_from: Option<usize>,
+    /// No guided candidate (the network fitted to the gradient planner's plans) when
+    /// pre-training's candidates never find the task.
+    #[arg(long)]
+    no_pretrain_guide: bool,
     /// Keep the pre-trained planner fixed in the joint phase (ablation; by default it
     /// learns from the executed runs, Algorithm 1).
     #[arg(long)]
@@ -203,6 +207,7 @@ impl TrainArgs {
         set(&mut p.candidates, self.pretrain_candidates);
         set(&mut p.length_weight, self.pretrain_length_weight);
         set(&mut p.horizon_from, self.pretrain_horizon_from);
+        p.guide &= !self.no_pretrain_guide;
         set(&mut s.eval_groups, self.eval_groups);
         set(&mut s.save_every, self.save_every);
         s.validate().map_err(flag_error)?;
@@ -277,6 +282,7 @@ impl TrainArgs {
                     "--pretrain-horizon-from",
                     differs(&self.pretrain_horizon_from, &saved.pretrain.horizon_from),
                 ),
+                ("--no-pretrain-guide", self.no_pretrain_guide && saved.pretrain.guide),
                 ("--freeze-planner", self.freeze_planner && !saved.joint.freeze_planner),
                 ("--runs-per-start", differs(&self.runs_per_start, &saved.joint.runs_per_start)),
                 ("--control-weight", differs(&self.control_weight, &saved.joint.control_weight)),
