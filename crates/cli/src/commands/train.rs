@@ -82,10 +82,10 @@ pub struct TrainArgs {
     /// [default: 4].
     #[arg(long)]
     pretrain_horizon_from: Option<usize>,
-    /// No guided candidate (the network fitted to the gradient planner's plans) when
-    /// pre-training's candidates never find the task.
+    /// When pre-training's candidates never find the task, try a guided candidate (the
+    /// network fitted to the gradient planner's plans from many starts).
     #[arg(long)]
-    no_pretrain_guide: bool,
+    pretrain_guide: bool,
     /// Keep the pre-trained planner fixed in the joint phase (ablation; by default it
     /// learns from the executed runs, Algorithm 1).
     #[arg(long)]
@@ -207,7 +207,7 @@ impl TrainArgs {
         set(&mut p.candidates, self.pretrain_candidates);
         set(&mut p.length_weight, self.pretrain_length_weight);
         set(&mut p.horizon_from, self.pretrain_horizon_from);
-        p.guide &= !self.no_pretrain_guide;
+        p.guide |= self.pretrain_guide;
         set(&mut s.eval_groups, self.eval_groups);
         set(&mut s.save_every, self.save_every);
         s.validate().map_err(flag_error)?;
@@ -282,7 +282,7 @@ impl TrainArgs {
                     "--pretrain-horizon-from",
                     differs(&self.pretrain_horizon_from, &saved.pretrain.horizon_from),
                 ),
-                ("--no-pretrain-guide", self.no_pretrain_guide && saved.pretrain.guide),
+                ("--pretrain-guide", self.pretrain_guide && !saved.pretrain.guide),
                 ("--freeze-planner", self.freeze_planner && !saved.joint.freeze_planner),
                 ("--runs-per-start", differs(&self.runs_per_start, &saved.joint.runs_per_start)),
                 ("--control-weight", differs(&self.control_weight, &saved.joint.control_weight)),

@@ -13,7 +13,7 @@
 //! attempts keep failing ([`CURRICULUM_AFTER`] restarts) climbs a horizon curriculum
 //! where the spec allows: the task on its first few waypoints, then more
 //! ([`PretrainConfig::horizon_from`]). If after all that no candidate has found the
-//! task, a *guided* candidate is tried ([`PretrainConfig::guide`]): the gradient
+//! task, a *guided* candidate can be tried ([`PretrainConfig::guide`], off by default): the gradient
 //! planner, drawing waypoints at goal centres, plans from each of a batch of starts,
 //! the network is fitted to those plans, and the constrained updates go on from
 //! there with a smaller step. The kept planner
@@ -124,7 +124,9 @@ pub struct PretrainConfig {
     #[serde(default = "two")]
     pub horizon_step: usize,
     /// Whether a guided candidate follows when no candidate has [`FOUND`] the task
-    /// (module docs). Runs saved before it existed had none.
+    /// (module docs). Off by default: its fit costs 1–3 minutes a run, and a run with
+    /// a smoke-test budget (a few updates per candidate, as in this project's tests)
+    /// would pay it every time. Runs saved before it existed had none.
     #[serde(default)]
     pub guide: bool,
 }
@@ -141,7 +143,7 @@ impl Default for PretrainConfig {
             length_weight: 0.05,
             horizon_from: 4,
             horizon_step: 2,
-            guide: true,
+            guide: false,
         }
     }
 }
