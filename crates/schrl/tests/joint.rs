@@ -7,7 +7,7 @@ use schrl::run::evaluate::mean_std;
 use schrl::run::execute::{Dispatch, Execution, Outcome, WaypointDispatcher};
 use schrl::run::joint::{JointConfig, JointTrainer};
 use schrl::task::along::ExecutionSpec;
-use schrl::task::{Task, TaskKind};
+use schrl::task::{Follow, Task, TaskKind};
 use sim::{Robot, Step};
 
 fn step(reached: bool, collided: bool) -> Step {
@@ -47,6 +47,44 @@ fn dispatcher_stops_when_the_robot_falls() {
     assert!(fell.terminated());
     assert_eq!(d.after_step(&fell, &[0.2, 0.0]), Dispatch::Done(Outcome::Fell));
     assert_eq!(d.outcome(), Some(Outcome::Fell));
+}
+
+#[test]
+fn a_carrot_leads_along_the_planned_segment_and_stops_at_its_waypoint() {
+    let carrot = Follow::Carrot { lookahead: 0.5 };
+    let near = |a: Vec<f64>, b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
+    let wps = vec![vec![2.0, 0.0], vec![2.0, 2.0]];
+    let mut d = WaypointDispatcher::new(vec![0.0, 0.0], wps, 100);
+    // Off the segment, it is pulled back onto it: 0.5 m ahead of its projection.
+    assert!(near(d.target(carrot, &[0.6, 0.4]).unwrap(), &[1.1, 0.0]));
+    // Behind the segment's start, the carrot starts from the start.
+    assert!(near(d.target(carrot, &[-1.0, 0.3]).unwrap(), &[0.5, 0.0]));
+    // Within the lookahead of the waypoint, and past it, the goal is the waypoint.
+    assert!(near(d.target(carrot, &[1.7, -0.2]).unwrap(), &[2.0, 0.0]));
+    assert!(near(d.target(carrot, &[2.6, 0.0]).unwrap(), &[2.0, 0.0]));
+    assert!(near(d.target(Follow::Waypoints, &[0.6, 0.4]).unwrap(), &[2.0, 0.0]));
+    // The next segment starts at the planned waypoint, not where it was reached.
+    d.after_step(&step(true, false), &[1.8, 0.1]);
+    assert!(near(d.target(carrot, &[1.8, 0.1]).unwrap(), &[2.0, 0.6]));
+    d.after_step(&step(true, false), &[2.0, 1.9]);
+    assert_eq!(d.target(carrot, &[2.0, 1.9]), None);
+    // 3-D segments (the Drone's) work the same way.
+    let d = WaypointDispatcher::new(vec![0.0, 0.0, 1.0], vec![vec![0.0, 0.0, 3.0]], 100);
+    assert!(near(d.target(carrot, &[0.3, 0.0, 1.2]).unwrap(), &[0.0, 0.0, 1.7]));
+}
+
+#[test]
+fn follow_settings_parse_and_a_carrot_must_look_beyond_the_reach() {
+    assert_eq!("waypoints".parse::<Follow>(), Ok(Follow::Waypoints));
+    assert_eq!("carrot:0.6".parse::<Follow>(), Ok(Follow::Carrot { lookahead: 0.6 }));
+    for bad in ["carrot", "carrot:-1", "carrot:abc", "carrot:inf", "pursuit:1"] {
+        let e = bad.parse::<Follow>().unwrap_err();
+        assert!(e.contains("carrot:"), "{bad}: {e}");
+    }
+    assert!(Follow::Carrot { lookahead: 0.6 }.check(0.3).is_ok());
+    let e = Follow::Carrot { lookahead: 0.3 }.check(0.3).unwrap_err();
+    assert!(e.contains("reach"), "{e}");
+    assert!(Follow::Waypoints.check(0.3).is_ok());
 }
 
 /// A path from (1.5, −1.5) with two waypoints inside each of `task`'s goals, in order

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use rand::SeedableRng;
-use schrl::task::{MIN_PLANNED_RADIUS, TASK_ROBOTS, Task, TaskKind};
+use schrl::task::{Follow, MIN_PLANNED_RADIUS, TASK_ROBOTS, Task, TaskKind};
 
 fn repo_tasks() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tasks")
@@ -299,7 +299,7 @@ fn drone_loop_timed_out_with_the_references_4000_steps() {
     let path: Vec<Vec<f64>> =
         std::iter::once(start).chain((0..t.steps).map(|k| bounce[k % 2].clone())).collect();
     let mut obs = vec![0.0; env.observation_space().dim()];
-    let mut run = start_run(env.as_mut(), 0, &path, t.step_limit, &mut obs).unwrap();
+    let mut run = start_run(env.as_mut(), 0, &path, t.step_limit, Follow::Waypoints, &mut obs).unwrap();
     let zero = vec![0.0; env.action_space().dim()];
     let outcome = loop {
         let step = env.step_into(&zero, &mut obs).unwrap();

@@ -13,6 +13,7 @@ use schrl::run::evaluate::{
 };
 use schrl::run::joint::{JointRunSettings, SettingError};
 use schrl::store::{self, JsonLines, RunKind};
+use schrl::task::Follow;
 use schrl::task::neural_sdf::{NeuralSdf, SdfFitConfig};
 use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watcher};
 use sim::Robot;
@@ -102,6 +103,11 @@ pub struct TrainArgs {
     /// own, 3e-4].
     #[arg(long)]
     control_lr: Option<f64>,
+    /// The goal the controller is given while it executes a plan: waypoints (each
+    /// waypoint in turn, the paper's) or carrot:METRES (a point that far ahead on the
+    /// planned segment, never past its waypoint) [default: waypoints].
+    #[arg(long, value_name = "waypoints|carrot:METRES")]
+    follow: Option<Follow>,
     /// Weight per metre of the path-length term the planner follows in the joint phase
     /// [default: 0.05].
     #[arg(long)]
@@ -187,6 +193,7 @@ impl TrainArgs {
         set(&mut j.runs_per_start, self.runs_per_start);
         set(&mut j.control_weight, self.control_weight);
         set(&mut j.control_lr, self.control_lr.map(Some));
+        set(&mut j.follow, self.follow);
         set(&mut j.length_weight, self.length_weight);
         j.freeze_planner = self.freeze_planner;
         j.freeze_controller = self.freeze_controller;
@@ -287,6 +294,7 @@ impl TrainArgs {
                 ("--runs-per-start", differs(&self.runs_per_start, &saved.joint.runs_per_start)),
                 ("--control-weight", differs(&self.control_weight, &saved.joint.control_weight)),
                 ("--control-lr", differs(&self.control_lr.map(Some), &saved.joint.control_lr)),
+                ("--follow", differs(&self.follow, &saved.joint.follow)),
                 ("--length-weight", differs(&self.length_weight, &saved.joint.length_weight)),
                 ("--anchor-weight", differs(&self.anchor_weight, &saved.joint.anchor_weight)),
                 ("--anchor-on", differs(&self.anchor_on, &saved.joint.anchor_on)),
@@ -374,6 +382,10 @@ pub struct EvalArgs {
     /// (e.g. DIR/general: the general controller before joint training).
     #[arg(long)]
     controller: Option<PathBuf>,
+    /// The goal the controller is given while it executes a plan: waypoints or
+    /// carrot:METRES (see `schrl train --follow`) [default: the run's].
+    #[arg(long, value_name = "waypoints|carrot:METRES")]
+    follow: Option<Follow>,
 }
 
 /// The planner `schrl eval` executes.
@@ -571,7 +583,13 @@ pub fn eval(args: EvalArgs) -> Result<()> {
         Some(path) => Some(JsonLines::create(path, args.force).map_err(super::store_error)?),
         None => None,
     };
-    let task = &t.task;
+    let mut task = t.task.clone();
+    if let Some(follow) = args.follow {
+        let reach = schrl::run::execute::task_env(task.robot, &task)?.reach_radius();
+        follow.check(reach).map_err(|e| anyhow::anyhow!("--follow {follow}: {e}"))?;
+        task.follow = follow;
+    }
+    let task = &task;
     let sizes = (args.groups, args.per_group);
     let e =
         evaluate_task_with(

@@ -11,6 +11,7 @@ use sim::{Env, EnvError};
 use super::execute::{Dispatch, WaypointDispatcher};
 use crate::control::Controller;
 use crate::control::policy::PolicyCache;
+use crate::task::Follow;
 
 /// How the loop's actions are chosen, and what a learner records of each step.
 pub trait Driver {
@@ -55,12 +56,14 @@ pub struct Episode {
     pub control_return: f64,
 }
 
-/// Drives `envs[i]` through `dispatchers[i]` until every run is over. Each environment
-/// must have been started on its run (see [`super::execute::start_run`]) with its
-/// observation in `raw[i × obs_dim ..]`; `raw` holds the last observations afterwards.
+/// Drives `envs[i]` through `dispatchers[i]` until every run is over, each robot's goal
+/// chosen by `follow` after every step. Each environment must have been started on its
+/// run (see [`super::execute::start_run`]) with its observation in `raw[i × obs_dim ..]`;
+/// `raw` holds the last observations afterwards.
 pub fn drive(
     envs: &mut [Box<dyn Env>],
     dispatchers: Vec<WaypointDispatcher>,
+    follow: Follow,
     raw: &mut [f64],
     driver: &mut dyn Driver,
 ) -> Result<Vec<Episode>, EnvError> {
@@ -100,9 +103,11 @@ pub fn drive(
             run.control_return += step.reward;
             rewards[i] = step.reward;
             match run.dispatcher.after_step(&step, env.position()) {
-                Dispatch::Continue => {}
-                Dispatch::NewGoal(g) => {
-                    env.set_goal(&g)?;
+                Dispatch::Continue if follow == Follow::Waypoints => {}
+                Dispatch::Continue | Dispatch::NewGoal(_) => {
+                    let goal =
+                        run.dispatcher.target(follow, env.position()).expect("a run going on has a goal");
+                    env.set_goal(&goal)?;
                     env.observe(obs);
                 }
                 Dispatch::Done(_) => {

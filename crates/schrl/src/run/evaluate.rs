@@ -19,7 +19,7 @@ use crate::control::Controller;
 use crate::plan::gradient_planner::{self, GradientPlannerConfig};
 use crate::plan::mip::{self, MipConfig};
 use crate::plan::planner::PathPlanner;
-use crate::task::Task;
+use crate::task::{Follow, Task};
 
 /// The evaluation protocol's defaults (paper §4.4: 5 groups of 100 runs); the seed of
 /// starts and plans is this project's fixed choice, so evaluations compare.
@@ -261,9 +261,10 @@ pub fn evaluate_task_with(
         let mut dispatchers = Vec::with_capacity(paths.len());
         for (i, (env, path)) in envs.iter_mut().zip(&paths).enumerate() {
             let obs = &mut raw[i * od..(i + 1) * od];
-            dispatchers.push(start_run(env.as_mut(), rng.random(), path, task.step_limit, obs)?);
+            dispatchers.push(start_run(env.as_mut(), rng.random(), path, task.step_limit, task.follow, obs)?);
         }
-        let episodes = drive(&mut envs, dispatchers, &mut raw, &mut MeanActions::new(controller))?;
+        let episodes =
+            drive(&mut envs, dispatchers, task.follow, &mut raw, &mut MeanActions::new(controller))?;
         let mut tally = GroupTally::default();
         for (index, (e, path)) in episodes.into_iter().zip(&paths).enumerate() {
             let run =
@@ -412,7 +413,7 @@ pub fn goal_episodes(
                 max_steps,
             ));
         }
-        let runs = drive(envs.envs_mut(), dispatchers, &mut raw, &mut driver)?;
+        let runs = drive(envs.envs_mut(), dispatchers, Follow::Waypoints, &mut raw, &mut driver)?;
         for ((episode, goal), env) in runs.into_iter().zip(goals).zip(envs.envs()) {
             out.push(GoalEpisode {
                 episode,

@@ -14,8 +14,8 @@
 use serde::{Deserialize, Serialize};
 use sim::{Env, Step};
 
-use crate::task::Task;
 use crate::task::along::{Entry, ExecutionSpec};
+use crate::task::{Follow, Task};
 
 /// How a run ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -64,6 +64,17 @@ impl WaypointDispatcher {
     /// The waypoint being driven to.
     pub fn current(&self) -> Option<&[f64]> {
         self.waypoints.get(self.next).map(|w| w.as_slice())
+    }
+
+    /// The goal `follow` gives a robot at `position` on the current segment (from the
+    /// planned waypoint before the current one, or the start); `None` once done.
+    pub fn target(&self, follow: Follow, position: &[f64]) -> Option<Vec<f64>> {
+        let to = self.current()?;
+        let from = match self.next {
+            0 => &self.reached[0],
+            k => &self.waypoints[k - 1],
+        };
+        Some(follow.target(from, to, position))
     }
 
     /// Accounts for one environment step that left the robot at `position`.
@@ -214,19 +225,21 @@ pub fn task_env(robot: sim::Robot, task: &Task) -> Result<Box<dyn Env>, sim::Env
     Ok(env)
 }
 
-/// Puts `env` at a path's start with its first waypoint as the goal.
+/// Puts `env` at a path's start with the goal `follow` gives there (the first
+/// waypoint, or a point on the way to it).
 pub fn start_run(
     env: &mut dyn Env,
     seed: u64,
     path: &[Vec<f64>],
     limit: usize,
+    follow: Follow,
     obs: &mut [f64],
 ) -> Result<WaypointDispatcher, sim::EnvError> {
     env.set_max_steps(limit);
     env.reset_into(seed, Some(&path[0]), obs)?;
     let d = WaypointDispatcher::new(path[0].clone(), path[1..].to_vec(), limit);
-    if let Some(w) = d.current() {
-        env.set_goal(w)?;
+    if let Some(goal) = d.target(follow, env.position()) {
+        env.set_goal(&goal)?;
         env.observe(obs);
     }
     Ok(d)

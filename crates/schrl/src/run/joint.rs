@@ -37,7 +37,7 @@ use crate::run::evaluate::reach_steps;
 use crate::run::execute::{Execution, Outcome, start_run, task_env};
 use crate::task::along::ExecutionSpec;
 use crate::task::neural_sdf::NeuralSdf;
-use crate::task::{ObstacleModel, Task};
+use crate::task::{Follow, ObstacleModel, Task};
 
 /// Joint-training settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -117,6 +117,11 @@ pub struct JointConfig {
     /// on the exact geometry either way.
     #[serde(default)]
     pub neural_obstacle: Option<NeuralSdf>,
+    /// The goal the controller is given while it executes a plan ([`Follow`]): the
+    /// waypoints themselves (the default, the paper's, and runs saved before it
+    /// existed) or a point ahead on the planned segment.
+    #[serde(default)]
+    pub follow: Follow,
 }
 
 impl JointConfig {
@@ -151,6 +156,7 @@ impl Default for JointConfig {
             goal_margin: 0.0,
             safe_margin: 0.0,
             neural_obstacle: None,
+            follow: Follow::Waypoints,
         }
     }
 }
@@ -560,11 +566,18 @@ impl JointTrainer {
                 });
             }
         }
+        let task = Task { follow: config.follow, ..task };
         let planned = config.planned_task(&task, true)?;
         let mut plan = PlanTrainer::new(planned, cpg)?
             .with_control_reward(PathLengthReward { weight: config.length_weight });
         plan.limit_joint_step(config.plan_step_limit)?;
         let envs = (0..config.plan_batch).map(|_| task_env(robot, &task)).collect::<Result<Vec<_>, _>>()?;
+        if let Some(env) = envs.first() {
+            config
+                .follow
+                .check(env.reach_radius())
+                .map_err(|message| RunError::Setting { key: "follow", message })?;
+        }
         let mut scaler = RewardScaler::new(config.plan_batch, control.config.ppo.gamma);
         scaler.stats = control.reward_scaler.stats.clone();
         let buffer = RolloutBuffer::new(1, control.policy.obs_dim(), control.policy.act_dim());
@@ -657,7 +670,14 @@ impl JointTrainer {
         for (i, (env, path)) in self.envs.iter_mut().zip(paths).enumerate() {
             let seed: u64 = self.rng.random();
             let obs = &mut raw[i * od..(i + 1) * od];
-            dispatchers.push(start_run(env.as_mut(), seed, path, self.task.step_limit, obs)?);
+            dispatchers.push(start_run(
+                env.as_mut(),
+                seed,
+                path,
+                self.task.step_limit,
+                self.task.follow,
+                obs,
+            )?);
         }
         let mut learner = Learner {
             control: &mut self.control,
@@ -670,7 +690,7 @@ impl JointTrainer {
             values: Vec::new(),
             runs: (0..n).map(|_| Transitions::default()).collect(),
         };
-        let episodes = drive(&mut self.envs[..n], dispatchers, &mut raw, &mut learner)?;
+        let episodes = drive(&mut self.envs[..n], dispatchers, self.task.follow, &mut raw, &mut learner)?;
         let Learner { runs: transitions, mut cache, .. } = learner;
         let c = &self.control;
         let gamma = c.config.ppo.gamma as f32;

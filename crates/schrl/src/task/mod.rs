@@ -16,7 +16,10 @@
 //! the reference setup (their final goal, the origin, lies inside the walls' cross).
 
 pub mod along;
+mod follow;
 pub mod neural_sdf;
+
+pub use follow::Follow;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -161,6 +164,9 @@ pub struct Task {
     /// What `safe` measures obstacles with ([`ObstacleModel::Exact`] as loaded; see
     /// [`Task::with_obstacle`]).
     pub obstacle: ObstacleModel,
+    /// The goal a robot executing a plan is given ([`Follow::Waypoints`] as loaded: a
+    /// run's setting, not the task file's).
+    pub follow: Follow,
 }
 
 /// What a task's `safe` measures obstacles with. The paper's planner saw a neural
@@ -508,6 +514,7 @@ impl Task {
             steps_to_reach_at: t.steps_to_reach_at,
             toml: toml_text.to_string(),
             obstacle: ObstacleModel::Exact,
+            follow: Follow::Waypoints,
         })
     }
 
