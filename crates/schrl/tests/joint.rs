@@ -193,6 +193,33 @@ fn the_joint_phase_moves_the_controller_by_its_own_step_size() {
     assert!(err.to_string().contains("control_lr"), "{err}");
 }
 
+/// `control_target_kl` stops the joint phase's PPO update once an epoch moved the
+/// policy that far: a tiny target stops it after the first epoch.
+#[test]
+fn a_control_target_kl_cuts_the_joint_phases_ppo_epochs() {
+    let minibatches = |control_target_kl: Option<f64>| {
+        let mut cc = ControlConfig::for_robot(Robot::Point);
+        cc.ppo = PpoConfig { rollout: 1000, minibatch: 100, epochs: 4, ..PpoConfig::reference() };
+        let control = ControlTrainer::new(cc).unwrap();
+        let cfg = JointConfig { plan_batch: 8, control_target_kl, ..JointConfig::default() };
+        let mut t =
+            JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control).unwrap();
+        loop {
+            if let Some(c) = t.iterate().unwrap().control {
+                break (c.minibatches, t.env_steps);
+            }
+        }
+    };
+    let ((all, steps), (cut, cut_steps)) = (minibatches(None), minibatches(Some(1e-9)));
+    assert_eq!(steps, cut_steps, "the same runs reached the update");
+    assert_eq!(all, 4 * cut, "4 epochs against 1: {all} and {cut} minibatches");
+    let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
+    let cfg = JointConfig { control_target_kl: Some(0.0), ..JointConfig::default() };
+    let err =
+        JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control).err().unwrap();
+    assert!(err.to_string().contains("control_target_kl"), "{err}");
+}
+
 #[test]
 fn a_task_for_another_robot_is_refused() {
     let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Car)).unwrap();

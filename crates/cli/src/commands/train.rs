@@ -103,6 +103,10 @@ pub struct TrainArgs {
     /// own, 3e-4].
     #[arg(long)]
     control_lr: Option<f64>,
+    /// Stop each of the joint phase's PPO updates once an epoch's mean approximate KL
+    /// exceeds this [default: the controller's own, none].
+    #[arg(long)]
+    control_target_kl: Option<f64>,
     /// The goal the controller is given while it executes a plan: waypoints (each
     /// waypoint in turn, the paper's) or carrot:METRES (a point that far ahead on the
     /// planned segment, never past its waypoint) [default: waypoints].
@@ -193,6 +197,7 @@ impl TrainArgs {
         set(&mut j.runs_per_start, self.runs_per_start);
         set(&mut j.control_weight, self.control_weight);
         set(&mut j.control_lr, self.control_lr.map(Some));
+        set(&mut j.control_target_kl, self.control_target_kl.map(Some));
         set(&mut j.follow, self.follow);
         set(&mut j.length_weight, self.length_weight);
         j.freeze_planner = self.freeze_planner;
@@ -294,6 +299,10 @@ impl TrainArgs {
                 ("--runs-per-start", differs(&self.runs_per_start, &saved.joint.runs_per_start)),
                 ("--control-weight", differs(&self.control_weight, &saved.joint.control_weight)),
                 ("--control-lr", differs(&self.control_lr.map(Some), &saved.joint.control_lr)),
+                (
+                    "--control-target-kl",
+                    differs(&self.control_target_kl.map(Some), &saved.joint.control_target_kl),
+                ),
                 ("--follow", differs(&self.follow, &saved.joint.follow)),
                 ("--length-weight", differs(&self.length_weight, &saved.joint.length_weight)),
                 ("--anchor-weight", differs(&self.anchor_weight, &saved.joint.anchor_weight)),
