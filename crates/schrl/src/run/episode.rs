@@ -59,13 +59,32 @@ pub struct Episode {
 /// Drives `envs[i]` through `dispatchers[i]` until every run is over, each robot's goal
 /// chosen by `follow` after every step. Each environment must have been started on its
 /// run (see [`super::execute::start_run`]) with its observation in `raw[i × obs_dim ..]`;
-/// `raw` holds the last observations afterwards.
+/// `raw` holds the last observations afterwards. A robot whose step is heavy
+/// ([`sim::Robot::steps_in_parallel`]: the Doggo) steps its runs on all of rayon's
+/// threads, as its `VecEnv` does in controller training; every run owns its
+/// environment and the actions are chosen before the step, so the runs are the same,
+/// bit for bit, whatever the thread count.
 pub fn drive(
     envs: &mut [Box<dyn Env>],
     dispatchers: Vec<WaypointDispatcher>,
     follow: Follow,
     raw: &mut [f64],
     driver: &mut dyn Driver,
+) -> Result<Vec<Episode>, EnvError> {
+    let parallel = envs
+        .first()
+        .is_some_and(|e| e.robot_name().parse::<sim::Robot>().is_ok_and(|r| r.steps_in_parallel()));
+    drive_threaded(envs, dispatchers, follow, raw, driver, parallel)
+}
+
+/// [`drive`] with the choice of stepping runs on rayon's threads made by the caller.
+pub(crate) fn drive_threaded(
+    envs: &mut [Box<dyn Env>],
+    dispatchers: Vec<WaypointDispatcher>,
+    follow: Follow,
+    raw: &mut [f64],
+    driver: &mut dyn Driver,
+    parallel: bool,
 ) -> Result<Vec<Episode>, EnvError> {
     let n = dispatchers.len();
     let (od, ad) = match envs.first() {
@@ -86,37 +105,148 @@ pub fn drive(
     let mut actions = vec![0.0; n * ad];
     let mut rewards = vec![0.0; n];
     let mut ended = vec![false; n];
+    let mut stepped: Vec<Result<Option<StepReport>, EnvError>> = Vec::with_capacity(n);
+    let envs = &mut envs[..n];
     while live.iter().any(|l| *l) {
         driver.act(raw, &live, &mut actions);
         let before = live.clone();
-        for (i, env) in envs.iter_mut().enumerate().take(n) {
-            ended[i] = false;
-            rewards[i] = 0.0;
-            if !live[i] {
-                continue;
-            }
-            let obs = &mut raw[i * od..(i + 1) * od];
-            let step = env.step_into(&actions[i * ad..(i + 1) * ad], obs)?;
-            let run = &mut runs[i];
-            run.trajectory.push(env.position().to_vec());
-            run.headings.push(env.heading());
-            run.control_return += step.reward;
-            rewards[i] = step.reward;
-            match run.dispatcher.after_step(&step, env.position()) {
-                Dispatch::Continue if follow == Follow::Waypoints => {}
-                Dispatch::Continue | Dispatch::NewGoal(_) => {
-                    let goal =
-                        run.dispatcher.target(follow, env.position()).expect("a run going on has a goal");
-                    env.set_goal(&goal)?;
-                    env.observe(obs);
-                }
-                Dispatch::Done(_) => {
-                    live[i] = false;
-                    ended[i] = true;
-                }
-            }
+        let one = |((env, run), (obs, action)): Lane<'_>| step_run(env.as_mut(), run, follow, action, obs);
+        if parallel {
+            use rayon::prelude::*;
+            envs.par_iter_mut()
+                .zip(runs.par_iter_mut())
+                .zip(raw.par_chunks_mut(od).zip(actions.par_chunks(ad)))
+                .map(one)
+                .collect_into_vec(&mut stepped);
+        } else {
+            stepped.clear();
+            stepped.extend(
+                envs.iter_mut().zip(runs.iter_mut()).zip(raw.chunks_mut(od).zip(actions.chunks(ad))).map(one),
+            );
+        }
+        for (i, s) in stepped.drain(..).enumerate() {
+            let report = s?;
+            rewards[i] = report.map_or(0.0, |r| r.reward);
+            ended[i] = report.is_some_and(|r| r.ended);
+            live[i] &= !ended[i];
         }
         driver.after_step(&before, &mut rewards, &ended);
     }
     Ok(runs)
+}
+
+/// One run's share of a step: its environment and record, its observation and action.
+type Lane<'a> = ((&'a mut Box<dyn Env>, &'a mut Episode), (&'a mut [f64], &'a [f64]));
+
+/// What one run's step reported to the loop.
+#[derive(Clone, Copy)]
+struct StepReport {
+    reward: f64,
+    ended: bool,
+}
+
+/// Steps one run with `action` (nothing if it is over, `None`), writing its
+/// observation into `obs` and moving its goal as its dispatcher and `follow` say.
+fn step_run(
+    env: &mut dyn Env,
+    run: &mut Episode,
+    follow: Follow,
+    action: &[f64],
+    obs: &mut [f64],
+) -> Result<Option<StepReport>, EnvError> {
+    if run.dispatcher.outcome().is_some() {
+        return Ok(None);
+    }
+    let step = env.step_into(action, obs)?;
+    run.trajectory.push(env.position().to_vec());
+    run.headings.push(env.heading());
+    run.control_return += step.reward;
+    let ended = match run.dispatcher.after_step(&step, env.position()) {
+        Dispatch::Continue if follow == Follow::Waypoints => false,
+        Dispatch::Continue | Dispatch::NewGoal(_) => {
+            let goal = run.dispatcher.target(follow, env.position()).expect("a run going on has a goal");
+            env.set_goal(&goal)?;
+            env.observe(obs);
+            false
+        }
+        Dispatch::Done(_) => true,
+    };
+    Ok(Some(StepReport { reward: step.reward, ended }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::run::execute::start_run;
+
+    /// Steers by a fixed function of the observation and records the rewards it sees,
+    /// so two loops that stepped alike leave the same record.
+    #[derive(Default)]
+    struct Recorder {
+        rewards: Vec<f64>,
+    }
+
+    impl Driver for Recorder {
+        fn act(&mut self, raw: &[f64], live: &[bool], actions: &mut [f64]) {
+            let (od, ad) = (raw.len() / live.len(), actions.len() / live.len());
+            for (o, a) in raw.chunks(od).zip(actions.chunks_mut(ad)) {
+                for (k, x) in a.iter_mut().enumerate() {
+                    *x = (o.iter().skip(k).step_by(ad).sum::<f64>()).sin();
+                }
+            }
+        }
+
+        fn after_step(&mut self, _live: &[bool], rewards: &mut [f64], _ended: &[bool]) {
+            self.rewards.extend_from_slice(rewards);
+        }
+    }
+
+    fn runs(parallel: bool) -> (Vec<Episode>, Vec<f64>) {
+        let robot = sim::Robot::Point;
+        let mut envs: Vec<Box<dyn Env>> =
+            (0..6).map(|_| sim::make_env(robot, robot.default_map()).unwrap()).collect();
+        let od = envs[0].observation_space().dim();
+        let mut raw = vec![0.0; envs.len() * od];
+        let mut dispatchers = vec![];
+        for (i, env) in envs.iter_mut().enumerate() {
+            env.reset(i as u64, None).unwrap();
+            let mut path = vec![env.position().to_vec()];
+            path.extend((0..3).map(|_| env.sample_goal()));
+            // Runs of different lengths: some end while others go on.
+            let limit = 50 + 40 * i;
+            dispatchers.push(
+                start_run(
+                    env.as_mut(),
+                    7 + i as u64,
+                    &path,
+                    limit,
+                    Follow::Waypoints,
+                    &mut raw[i * od..(i + 1) * od],
+                )
+                .unwrap(),
+            );
+        }
+        let mut rec = Recorder::default();
+        let episodes =
+            drive_threaded(&mut envs, dispatchers, Follow::Waypoints, &mut raw, &mut rec, parallel).unwrap();
+        (episodes, rec.rewards)
+    }
+
+    #[test]
+    fn runs_stepped_on_threads_are_the_runs_stepped_in_order() {
+        let (serial, serial_rewards) = runs(false);
+        let (threaded, threaded_rewards) = runs(true);
+        let lengths: Vec<usize> = serial.iter().map(|e| e.trajectory.len()).collect();
+        assert!(
+            lengths.windows(2).any(|w| w[0] != w[1]),
+            "the runs should end at different steps: {lengths:?}"
+        );
+        assert_eq!(serial_rewards, threaded_rewards);
+        for (s, t) in serial.iter().zip(&threaded) {
+            assert_eq!(s.trajectory, t.trajectory);
+            assert_eq!(s.headings, t.headings);
+            assert_eq!(s.dispatcher, t.dispatcher);
+            assert_eq!(s.control_return.to_bits(), t.control_return.to_bits());
+        }
+    }
 }
