@@ -146,13 +146,13 @@ fn mean_std_is_the_sample_statistic() {
 
 #[test]
 fn a_tiny_joint_run_raises_the_spec_score_and_trains_both_sides() {
-    let mut cc = ControlConfig::for_robot(Robot::Point);
-    cc.ppo = PpoConfig { rollout: 1000, minibatch: 100, epochs: 2, ..PpoConfig::reference() };
-    let control = ControlTrainer::new(cc).unwrap();
-    let before = control.policy.params.clone();
-    let task = Task::point(TaskKind::Branch);
-    let cfg = JointConfig { plan_batch: 8, ..JointConfig::default() };
-    let mut t = JointTrainer::new(task, cfg, CpgConfig { seed: 3, ..CpgConfig::default() }, control).unwrap();
+    let mut t = small_joint(
+        TaskKind::Branch,
+        2,
+        JointConfig::default(),
+        CpgConfig { seed: 3, ..CpgConfig::default() },
+    );
+    let before = t.control.policy.params.clone();
     let mut rho = Vec::new();
     let mut ppo_updates = 0;
     for _ in 0..60 {
@@ -172,13 +172,9 @@ fn a_tiny_joint_run_raises_the_spec_score_and_trains_both_sides() {
 #[test]
 fn the_joint_phase_moves_the_controller_by_its_own_step_size() {
     let moved = |control_lr: Option<f64>| {
-        let mut cc = ControlConfig::for_robot(Robot::Point);
-        cc.ppo = PpoConfig { rollout: 1000, minibatch: 100, epochs: 2, ..PpoConfig::reference() };
-        let control = ControlTrainer::new(cc).unwrap();
-        let before = control.policy.params.clone();
-        let cfg = JointConfig { plan_batch: 8, control_lr, ..JointConfig::default() };
-        let mut t =
-            JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control).unwrap();
+        let cfg = JointConfig { control_lr, ..JointConfig::default() };
+        let mut t = small_joint(TaskKind::Seq, 2, cfg, CpgConfig::default());
+        let before = t.control.policy.params.clone();
         while t.iterate().unwrap().control.is_none() {}
         let after = &t.control.policy.params;
         before.iter().zip(after).map(|(a, b)| (a - b).abs()).fold(0.0_f32, f32::max)
@@ -186,11 +182,7 @@ fn the_joint_phase_moves_the_controller_by_its_own_step_size() {
     let (own, small) = (moved(None), moved(Some(3e-6)));
     // Adam moves each parameter by about the step size per minibatch.
     assert!(own > 30.0 * small && small > 0.0, "3e-4: {own}, 3e-6: {small}");
-    let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
-    let cfg = JointConfig { control_lr: Some(-1e-4), ..JointConfig::default() };
-    let err =
-        JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control).err().unwrap();
-    assert!(err.to_string().contains("control_lr"), "{err}");
+    refused_naming(JointConfig { control_lr: Some(-1e-4), ..JointConfig::default() }, "control_lr");
 }
 
 /// `control_target_kl` stops the joint phase's PPO update once an epoch moved the
@@ -198,12 +190,8 @@ fn the_joint_phase_moves_the_controller_by_its_own_step_size() {
 #[test]
 fn a_control_target_kl_cuts_the_joint_phases_ppo_epochs() {
     let minibatches = |control_target_kl: Option<f64>| {
-        let mut cc = ControlConfig::for_robot(Robot::Point);
-        cc.ppo = PpoConfig { rollout: 1000, minibatch: 100, epochs: 4, ..PpoConfig::reference() };
-        let control = ControlTrainer::new(cc).unwrap();
-        let cfg = JointConfig { plan_batch: 8, control_target_kl, ..JointConfig::default() };
-        let mut t =
-            JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control).unwrap();
+        let cfg = JointConfig { control_target_kl, ..JointConfig::default() };
+        let mut t = small_joint(TaskKind::Seq, 4, cfg, CpgConfig::default());
         loop {
             if let Some(c) = t.iterate().unwrap().control {
                 break (c.minibatches, t.env_steps);
@@ -213,11 +201,31 @@ fn a_control_target_kl_cuts_the_joint_phases_ppo_epochs() {
     let ((all, steps), (cut, cut_steps)) = (minibatches(None), minibatches(Some(1e-9)));
     assert_eq!(steps, cut_steps, "the same runs reached the update");
     assert_eq!(all, 4 * cut, "4 epochs against 1: {all} and {cut} minibatches");
+    refused_naming(
+        JointConfig { control_target_kl: Some(0.0), ..JointConfig::default() },
+        "control_target_kl",
+    );
+}
+
+/// A Point joint trainer on `kind` planning batches of 8, its controller's PPO small
+/// (1000-step rollouts, minibatches of 100, `epochs` passes) so an update comes soon.
+fn small_joint(kind: TaskKind, epochs: usize, cfg: JointConfig, plan: CpgConfig) -> JointTrainer {
+    let mut cc = ControlConfig::for_robot(Robot::Point);
+    cc.ppo = PpoConfig { rollout: 1000, minibatch: 100, epochs, ..PpoConfig::reference() };
+    let control = ControlTrainer::new(cc).unwrap();
+    JointTrainer::new(Task::point(kind), JointConfig { plan_batch: 8, ..cfg }, plan, control).unwrap()
+}
+
+/// `JointTrainer::new` refuses `cfg` (on Point Seq) with an error that names `key`;
+/// the error's text.
+fn refused_naming(cfg: JointConfig, key: &str) -> String {
     let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
-    let cfg = JointConfig { control_target_kl: Some(0.0), ..JointConfig::default() };
-    let err =
-        JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control).err().unwrap();
-    assert!(err.to_string().contains("control_target_kl"), "{err}");
+    let err = JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains(key), "{err}");
+    err
 }
 
 #[test]
@@ -237,12 +245,8 @@ fn negative_or_infinite_planning_margins_are_refused_by_name() {
         (JointConfig { goal_margin: -0.1, ..JointConfig::default() }, "goal_margin"),
         (JointConfig { safe_margin: f64::INFINITY, ..JointConfig::default() }, "safe_margin"),
     ] {
-        let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
-        let err = JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control)
-            .err()
-            .unwrap()
-            .to_string();
-        assert!(err.contains(key) && err.contains("non-negative"), "{err}");
+        let err = refused_naming(cfg, key);
+        assert!(err.contains("non-negative"), "{err}");
     }
     let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
     let cfg = JointConfig { safe_margin: 0.15, ..JointConfig::default() };
