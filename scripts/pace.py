@@ -1,0 +1,56 @@
+#!/usr/bin/env python3
+"""How fast, and which way round, a robot moves in executed runs.
+
+Reads the file `schrl eval --trajectories FILE.jsonl` writes (one run per line, with
+`positions` and `headings` at every control step) and prints, over every run:
+
+- net pace: metres per step covered over 50-step windows (the distance between a
+  window's first and last positions, divided by 50);
+- per step, the displacement along the direction of travel (the net direction over
+  the 10 steps around it) and across it (sway);
+- how the direction of travel sits against the robot's heading (its yaw), in 30°
+  bins: 0–30° is moving nose first, 150–180° tail first.
+
+Windows that move less than 5 cm net are left out of the last two (turning on the
+spot has no direction of travel). Standard library only.
+
+    python3 scripts/pace.py runs.jsonl
+"""
+
+import json
+import math
+import sys
+
+
+def main(path):
+    runs = [json.loads(line) for line in open(path)]
+    net50, along, across, facing = [], [], [], [0] * 6
+    for run in runs:
+        p, yaw = run["positions"], run["headings"]
+        for i in range(0, len(p) - 50, 50):
+            net50.append(math.dist(p[i][:2], p[i + 50][:2]) / 50)
+        for i in range(5, len(p) - 6):
+            dx, dy = p[i + 5][0] - p[i - 5][0], p[i + 5][1] - p[i - 5][1]
+            d = math.hypot(dx, dy)
+            if d < 0.05:
+                continue
+            ux, uy = dx / d, dy / d
+            sx, sy = p[i + 1][0] - p[i][0], p[i + 1][1] - p[i][1]
+            along.append(sx * ux + sy * uy)
+            across.append(abs(sy * ux - sx * uy))
+            off = (math.atan2(dy, dx) - yaw[i] + math.pi) % (2 * math.pi) - math.pi
+            facing[min(int(abs(math.degrees(off)) // 30), 5)] += 1
+    if not along:
+        sys.exit(f"{path}: no run moved 5 cm in 10 steps")
+    mean = lambda xs: sum(xs) / len(xs)
+    print(f"{len(runs)} runs")
+    print(f"net pace over 50-step windows: {mean(net50):.4f} m per step")
+    print(f"per step along the travel: {mean(along):.4f} m, across it: {mean(across):.4f} m")
+    shares = ", ".join(f"{30 * k}-{30 * k + 30}°: {n / len(along):.2f}" for k, n in enumerate(facing))
+    print(f"travel against heading: {shares}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 2:
+        sys.exit("usage: pace.py FILE.jsonl (from schrl eval --trajectories)")
+    main(sys.argv[1])
