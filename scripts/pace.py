@@ -40,8 +40,8 @@ def main(path):
             across.append(abs(sy * ux - sx * uy))
             off = (math.atan2(dy, dx) - yaw[i] + math.pi) % (2 * math.pi) - math.pi
             facing[min(int(abs(math.degrees(off)) // 30), 5)] += 1
-    if not along:
-        sys.exit(f"{path}: no run moved 5 cm in 10 steps")
+    if not along or not net50:
+        sys.exit(f"{path}: no run lasted 50 steps and moved 5 cm in 10 of them")
     mean = lambda xs: sum(xs) / len(xs)
     print(f"{len(runs)} runs")
     print(f"net pace over 50-step windows: {mean(net50):.4f} m per step")
