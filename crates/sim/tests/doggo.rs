@@ -4,15 +4,21 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sim::mujoco::{
-    ACTION_FILTER, CarTwin, Doggo, FALL_HEIGHT, FALL_TILT_SECONDS, PointTwin, STANDING_HEIGHT,
+    ACTION_FILTER, CarTwin, Doggo, FALL_HEIGHT, FALL_TILT_SECONDS, GAIT, Gait, PointTwin, STANDING_HEIGHT,
 };
 use sim::vec_env::member_seed;
 use sim::{Car, Dynamics, Env, GoalEnv, Map, Point, Robot, Step, VecEnv, make_env};
 
+/// A Doggo on `map` without a gait: its motors do what the policy says, so the body's
+/// physics can be checked on its own.
 fn doggo_on(map: &str) -> GoalEnv<Doggo> {
     let map = Map::by_name(map).unwrap();
-    GoalEnv::new(Doggo::new(&map).unwrap(), map).unwrap()
+    GoalEnv::new(Doggo::with_gait(&map, None).unwrap(), map).unwrap()
 }
+
+/// Where the 12 filtered policy controls sit in the observation (the gait's phase
+/// follows them).
+const CONTROLS: std::ops::Range<usize> = OBS - 14..OBS - 2;
 
 /// Mass of the model (kg), from Safety-Gym's densities and sizes: two torso
 /// cylinders of density 0.5, twelve capsules of density 5.
@@ -62,7 +68,8 @@ fn a_full_control_is_a_torque_of_its_gear() {
     let mut env = doggo_on("empty");
     let mut obs = vec![0.0; OBS];
     env.reset_into(0, Some(&[0.0, 0.0]), &mut obs).unwrap();
-    assert!(obs[OBS - 12..].iter().all(|c| *c == 0.0), "controls start at rest");
+    assert!(obs[CONTROLS].iter().all(|c| *c == 0.0), "controls start at rest");
+    assert_eq!(&obs[OBS - 2..], &[0.0, 0.0], "no gait, no phase");
     let mut action = [0.0; 12];
     action[4] = 1.0;
     action[9] = -0.5;
@@ -88,15 +95,15 @@ fn a_full_control_is_a_torque_of_its_gear() {
         );
         assert!(torque.iter().enumerate().all(|(i, t)| i == 4 || i == 9 || *t == 0.0), "{torque:?}");
         // The policy observes its controls.
-        assert_eq!(&obs[OBS - 12..], d.ctrl(), "step {k}");
-        assert!((obs[OBS - 12 + 4] - reached).abs() < 1e-15);
+        assert_eq!(&obs[CONTROLS], d.ctrl(), "step {k}");
+        assert!((obs[CONTROLS.start + 4] - reached).abs() < 1e-15);
     }
 }
 
 #[test]
 fn loads_and_steps_through_make_env() {
     let mut env = make_env(Robot::Doggo, Map::by_name("walls").unwrap()).unwrap();
-    assert_eq!((env.observation_space().dim(), env.action_space().dim(), env.plan_dim()), (70, 12, 2));
+    assert_eq!((env.observation_space().dim(), env.action_space().dim(), env.plan_dim()), (72, 12, 2));
     let obs = env.reset(3, Some(&[2.0, -2.0])).unwrap();
     assert_eq!(env.position(), &[2.0, -2.0]);
     env.set_goal(&[2.0, 2.0]).unwrap();
@@ -109,6 +116,51 @@ fn loads_and_steps_through_make_env() {
     let d = (g[0] * g[0] + g[1] * g[1]).sqrt();
     assert!((d - 4.0).abs() < 0.05, "goal distance {d}");
     assert!(env.step(&[0.0; 11]).is_err(), "a short action is refused");
+}
+
+/// With the policy at rest the default gait alone walks it: its reason to exist is a
+/// Doggo that walks faster than the 0.017 m a step its policies learned without one.
+#[test]
+fn the_default_gait_walks_with_the_policy_at_rest() {
+    let gait = GAIT.expect("a default gait");
+    let mut env = make_env(Robot::Doggo, Map::by_name("empty").unwrap()).unwrap();
+    let mut obs = vec![0.0; OBS];
+    for seed in 0..3 {
+        env.reset_into(seed, Some(&[0.0, 0.0]), &mut obs).unwrap();
+        let steps = 300;
+        for t in 1..=steps {
+            let s = env.step_into(&[0.0; 12], &mut obs).unwrap();
+            assert!(!s.fell, "seed {seed}: fell at step {t}");
+            // The phase is observed: 10 physics steps of 0.01 s per control step.
+            let (sin, cos) = gait.phase(t as f64 * 0.1).sin_cos();
+            assert!((obs[OBS - 2] - sin).abs() < 1e-9 && (obs[OBS - 1] - cos).abs() < 1e-9, "phase at {t}");
+            assert!(obs[CONTROLS].iter().all(|c| *c == 0.0), "the policy's controls stay at rest");
+        }
+        let p = env.position();
+        let pace = (p[0] * p[0] + p[1] * p[1]).sqrt() / steps as f64;
+        assert!(pace > 0.025, "seed {seed}: {pace} m a step");
+    }
+}
+
+/// The motors get the filtered policy controls plus the gait's, clipped to ±1.
+#[test]
+fn the_motors_get_the_policy_plus_the_gait_clipped() {
+    let map = Map::by_name("empty").unwrap();
+    let mut env = GoalEnv::new(Doggo::with_gait(&map, Some(Gait::PRONK)).unwrap(), map).unwrap();
+    let mut obs = vec![0.0; OBS];
+    env.reset_into(0, Some(&[0.0, 0.0]), &mut obs).unwrap();
+    let action = [0.6; 12];
+    for _ in 0..3 {
+        env.step_into(&action, &mut obs).unwrap();
+    }
+    let d = env.dynamics();
+    // The controls applied in the last physics step, at the time it began.
+    let g = Gait::PRONK.controls(d.data().time() - 0.01);
+    for (j, c) in d.data().ctrl().iter().enumerate() {
+        let want = (obs[CONTROLS.start + j] + g[j]).clamp(-1.0, 1.0);
+        assert!((c - want).abs() < 1e-12, "motor {j}: {c} against {want}");
+    }
+    assert!(g.iter().step_by(3).all(|u| *u == 0.0), "hip z steers, the gait leaves it alone");
 }
 
 #[test]
@@ -300,7 +352,8 @@ fn touching_a_wall_is_a_collision() {
 
 #[test]
 fn saved_state_resumes_bit_for_bit() {
-    let mut env = doggo_on("walls");
+    let map = Map::by_name("walls").unwrap();
+    let mut env = GoalEnv::new(Doggo::new(&map).unwrap(), map).unwrap();
     let mut obs = vec![0.0; OBS];
     env.reset_into(9, None, &mut obs).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(1);
@@ -317,8 +370,10 @@ fn saved_state_resumes_bit_for_bit() {
         actions[60..].iter().flat_map(|a| env.step_into(a, &mut o).map(|_| o.clone()).unwrap()).collect()
     };
     let first = run(&mut env);
+    // Restored into a Doggo without a gait: the saved state brings its gait.
     let mut fresh = doggo_on("walls");
     fresh.restore_state(&saved).unwrap();
+    assert_eq!(fresh.dynamics().gait(), GAIT);
     let mut after = vec![0.0; OBS];
     fresh.observe(&mut after);
     assert_eq!(before, after, "the restored observation is the saved one");

@@ -1,4 +1,4 @@
-//! Doggo: the paper's quadruped (observation 70, action 12), on MuJoCo.
+//! Doggo: the paper's quadruped (observation 72, action 12), on MuJoCo.
 //!
 //! The model is `assets/doggo.xml` ([`DOGGO_XML`]): Safety-Gym's Doggo, written for
 //! this project from the facts of its public MJCF; the walls of the map are added to
@@ -17,14 +17,17 @@
 //! | touch sensors | 8: each lower leg's ankle and foot | Safety-Gym's `doggo.xml` |
 //! | reach radius | 0.3 m | reference setup |
 //!
-//! Observation (70): accelerometer, velocimeter, gyro, magnetometer (3 each, front
+//! Observation (72): accelerometer, velocimeter, gyro, magnetometer (3 each, front
 //! torso frame), the 8 touch sensors, the velocities of the 12 motor joints, the sines
 //! and then the cosines of their angles, the goal vector in the robot's yaw frame (2),
-//! and the 12 motor controls; the passive waist is not observed, as in Safety-Gym.
+//! the 12 filtered policy controls, and the sine and cosine of the gait's phase (zeros
+//! without a gait); the passive waist is not observed, as in Safety-Gym.
 //! Actions are the 12 motor commands in the order front-left, front-right, back-left,
-//! back-right, each leg hip z, hip y, ankle; the controls follow them through a
-//! low-pass filter ([`ACTION_FILTER`]; Safety-Gym's 58 observations and unfiltered
-//! controls are this with β = 0 and the controls not observed).
+//! back-right, each leg hip z, hip y, ankle; they pass through a low-pass filter
+//! ([`ACTION_FILTER`]) and, with a [`Gait`] (the default, [`GAIT`]), are added to the
+//! gait's open-loop controls at every physics step, so the policy learns a residual on
+//! a rhythm that already walks. Safety-Gym's 58 observations and controls are this with
+//! β = 0, no gait, and neither the controls nor the phase observed.
 //!
 //! A fall — the torso's centre below [`FALL_HEIGHT`], or the front torso tilted past 60°
 //! ([`FALL_TILT_COS`]) for [`FALL_TILT_SECONDS`] without a break: on its side or upside
@@ -67,6 +70,66 @@ pub const FALL_TILT_COS: f64 = 0.5;
 /// rears past 60° and rights itself, a fallen one stays down. Twice the longest righting
 /// measured (README's Doggo section).
 pub const FALL_TILT_SECONDS: f64 = 2.0;
+
+/// An open-loop gait: each physics step, the hip-y and ankle motors of every leg get
+/// `hip_y · s · sin φ_leg` and `ankle · sin(φ_leg + ankle_lag)` on top of the policy's
+/// filtered controls (the sum clipped to the control range), where `φ_leg = 2π f t +
+/// offset_leg`, `t` the simulated time since the reset and `s` −1 on the rear legs when
+/// `rear_reversed`. The hip-z motors, which steer, are the policy's alone. A gait prior
+/// in the manner of PMTG (Iscen et al. 2018), simplified to a fixed rhythm: the policy
+/// does not modulate it, it corrects and steers it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Gait {
+    /// Cycles per second.
+    pub freq_hz: f64,
+    /// Phase offset of each leg (rad): front-left, front-right, back-left, back-right.
+    pub offsets: [f64; 4],
+    /// Amplitude on the hip-y motors (control units).
+    pub hip_y: f64,
+    /// Amplitude on the ankle motors (control units).
+    pub ankle: f64,
+    /// The ankle's phase relative to its hip (rad).
+    pub ankle_lag: f64,
+    /// Whether the rear hips swing against the front ones (their ranges face the other
+    /// way: front −75°..15°, rear 0°..135°).
+    pub rear_reversed: bool,
+}
+
+impl Gait {
+    /// All four legs in phase at 4 Hz, full hip and ankle swings half a cycle apart,
+    /// rear hips reversed. Chosen by an open-loop sweep (zero policy action; 6 leg
+    /// patterns × 2–8 Hz × ankle amplitude and lag × rear sign, then the leaders on 12
+    /// starts of 1000 steps, straight, with ±0.3 random residuals, and steered by hip z):
+    /// the fastest with no fall in any of those conditions (README's Doggo section).
+    pub const PRONK: Gait = Gait {
+        freq_hz: 4.0,
+        offsets: [0.0; 4],
+        hip_y: 1.0,
+        ankle: 1.0,
+        ankle_lag: std::f64::consts::PI,
+        rear_reversed: true,
+    };
+
+    /// Its phase (rad) at simulated time `t`.
+    pub fn phase(&self, t: f64) -> f64 {
+        2.0 * std::f64::consts::PI * self.freq_hz * t
+    }
+
+    /// Its controls at simulated time `t`, in action order.
+    pub fn controls(&self, t: f64) -> [f64; JOINTS] {
+        let mut u = [0.0; JOINTS];
+        for (leg, offset) in self.offsets.iter().enumerate() {
+            let phi = self.phase(t) + offset;
+            let sign = if leg >= 2 && self.rear_reversed { -1.0 } else { 1.0 };
+            u[3 * leg + 1] = sign * self.hip_y * phi.sin();
+            u[3 * leg + 2] = self.ankle * (phi + self.ankle_lag).sin();
+        }
+        u
+    }
+}
+
+/// The gait a Doggo walks with unless told otherwise ([`Doggo::with_gait`]).
+pub const GAIT: Option<Gait> = Some(Gait::PRONK);
 
 const NAME: &str = "doggo";
 const SUBSTEPS: usize = 10;
@@ -175,17 +238,41 @@ pub struct Doggo {
     fallen: bool,
     /// Simulated time at which the current tilt past 60° began (none: upright).
     tilted_since: Option<f64>,
+    /// The policy's controls after the low-pass filter; the motors get these plus the
+    /// gait's.
+    filtered: [f64; JOINTS],
+    gait: Option<Gait>,
 }
 
 impl Doggo {
-    /// A Doggo standing at the origin of `map` (`walls` or `empty`).
+    /// A Doggo standing at the origin of `map` (`walls` or `empty`), walking with the
+    /// default [`GAIT`].
     pub fn new(map: &Map) -> Result<Self, EnvError> {
+        Self::with_gait(map, GAIT)
+    }
+
+    /// A Doggo standing at the origin of `map` whose motors follow `gait` under the
+    /// policy's controls (none: the policy's controls alone).
+    pub fn with_gait(map: &Map, gait: Option<Gait>) -> Result<Self, EnvError> {
         let compiled = compiled(map)?;
         let data = MjData::new(compiled.model.clone());
-        let mut dog =
-            Self { compiled, map: map.name(), data, pos: [0.0; 2], fallen: false, tilted_since: None };
+        let mut dog = Self {
+            compiled,
+            map: map.name(),
+            data,
+            pos: [0.0; 2],
+            fallen: false,
+            tilted_since: None,
+            filtered: [0.0; JOINTS],
+            gait,
+        };
         dog.place([0.0, 0.0], 0.0);
         Ok(dog)
+    }
+
+    /// The gait its motors follow.
+    pub fn gait(&self) -> Option<Gait> {
+        self.gait
     }
 
     /// MuJoCo's data (positions, velocities, contacts, sensors), read only.
@@ -247,6 +334,16 @@ impl Doggo {
         self.pos = xy;
         self.fallen = false;
         self.tilted_since = None;
+        self.filtered = [0.0; JOINTS];
+    }
+
+    /// Sets the motors' controls for a physics step at simulated time `t`: the filtered
+    /// policy controls plus the gait's, clipped to the control range.
+    fn drive(&mut self, t: f64) {
+        let gait = self.gait.map_or([0.0; JOINTS], |g| g.controls(t));
+        for ((c, f), g) in self.data.ctrl_mut().iter_mut().zip(&self.filtered).zip(gait) {
+            *c = (f + g).clamp(-1.0, 1.0);
+        }
     }
 
     fn touches_wall(&self) -> bool {
@@ -266,6 +363,8 @@ impl Doggo {
             qpos: self.data.qpos().to_vec(),
             qvel: self.data.qvel().to_vec(),
             ctrl: self.data.ctrl().to_vec(),
+            filtered: Some(self.filtered.to_vec()),
+            gait: self.gait,
             qacc_warmstart: self.data.qacc_warmstart().to_vec(),
             sensordata: self.data.sensordata().to_vec(),
             fallen: self.fallen,
@@ -280,6 +379,8 @@ impl Doggo {
         len("qpos", s.qpos.len(), NQ)?;
         len("qvel", s.qvel.len(), NV)?;
         len("ctrl", s.ctrl.len(), JOINTS)?;
+        let filtered = s.filtered.as_ref().unwrap_or(&s.ctrl);
+        len("filtered", filtered.len(), JOINTS)?;
         len("qacc_warmstart", s.qacc_warmstart.len(), NV)?;
         len("sensordata", s.sensordata.len(), SENSORS)?;
         self.data.set_time(s.time);
@@ -294,6 +395,8 @@ impl Doggo {
         self.pos = [s.qpos[0], s.qpos[1]];
         self.fallen = s.fallen;
         self.tilted_since = s.tilted_since;
+        self.filtered.copy_from_slice(filtered);
+        self.gait = s.gait;
         Ok(())
     }
 }
@@ -307,6 +410,13 @@ struct DoggoState {
     qpos: Vec<f64>,
     qvel: Vec<f64>,
     ctrl: Vec<f64>,
+    /// The filtered policy controls; absent in states saved before the gait, whose
+    /// controls were the filtered policy's.
+    #[serde(default)]
+    filtered: Option<Vec<f64>>,
+    /// Absent in states saved before the gait: none.
+    #[serde(default)]
+    gait: Option<Gait>,
     qacc_warmstart: Vec<f64>,
     sensordata: Vec<f64>,
     fallen: bool,
@@ -326,7 +436,7 @@ impl<'de> Deserialize<'de> for Doggo {
         use serde::de::Error;
         let s = DoggoState::deserialize(deserializer)?;
         let map = Map::by_name(&s.map).ok_or_else(|| D::Error::custom(format!("unknown map '{}'", s.map)))?;
-        let mut dog = Doggo::new(&map).map_err(D::Error::custom)?;
+        let mut dog = Doggo::with_gait(&map, s.gait).map_err(D::Error::custom)?;
         dog.set_state(&s).map_err(D::Error::custom)?;
         Ok(dog)
     }
@@ -334,7 +444,7 @@ impl<'de> Deserialize<'de> for Doggo {
 
 impl Dynamics for Doggo {
     const NAME: &'static str = NAME;
-    const OBS_DIM: usize = SENSORS + 3 * JOINTS + 2 + JOINTS;
+    const OBS_DIM: usize = SENSORS + 3 * JOINTS + 2 + JOINTS + 2;
     const ACT_DIM: usize = JOINTS;
     const PLAN_DIM: usize = 2;
     const REACH_RADIUS: f64 = 0.3;
@@ -348,12 +458,13 @@ impl Dynamics for Doggo {
     }
 
     fn advance(&mut self, action: &[f64], _map: &Map, _goal: &[f64]) -> bool {
-        for (c, a) in self.data.ctrl_mut().iter_mut().zip(action) {
+        for (c, a) in self.filtered.iter_mut().zip(action) {
             *c = ACTION_FILTER * *c + (1.0 - ACTION_FILTER) * a;
         }
         let mut collided = false;
         for _ in 0..SUBSTEPS {
             let before = self.data.time();
+            self.drive(before);
             self.data.step();
             if self.diverged() {
                 // MuJoCo has put the robot back at the model's start: the episode ends
@@ -406,6 +517,9 @@ impl Dynamics for Doggo {
         let to_goal = [goal[0] - self.pos[0], goal[1] - self.pos[1]];
         let g = Heading::new(self.yaw()).to_body(to_goal);
         obs[SENSORS + 3 * JOINTS..SENSORS + 3 * JOINTS + 2].copy_from_slice(&g);
-        obs[SENSORS + 3 * JOINTS + 2..].copy_from_slice(self.data.ctrl());
+        let controls = SENSORS + 3 * JOINTS + 2;
+        obs[controls..controls + JOINTS].copy_from_slice(&self.filtered);
+        let (s, c) = self.gait.map_or((0.0, 0.0), |g| g.phase(self.data.time()).sin_cos());
+        obs[controls + JOINTS..].copy_from_slice(&[s, c]);
     }
 }
