@@ -6,7 +6,11 @@
 //! fastest through 12 starts of 1000 steps in five conditions — straight, with uniform
 //! ±0.3 random residuals on every motor, and steered by a hip-z residual of +0.5, −0.5
 //! and +1 (left legs one way, right legs the other) — and keeps the fastest under the
-//! random residuals among those that never fall.
+//! random residuals among those that never fall. Stage 3 gives the chosen rhythm
+//! ([`Gait::PRONK`]) its steer: every hip-z swing pattern (which legs swing together)
+//! and phase against the stride, walked from 6 starts for 500 steps at steer +1 and
+//! −1, ranked by how fast it turns (half the difference of the two yaw rates) among
+//! those that never fall. `-- --steer-only` runs stage 3 alone.
 
 use std::f64::consts::PI;
 
@@ -24,8 +28,9 @@ struct Walk {
 }
 
 /// Walks `gait` from `starts` random headings for `steps` control steps, the policy's
-/// action each step `noise`-wide uniform residuals plus `turn` on the hip-z motors.
-fn walk(map: &Map, gait: Gait, starts: u64, steps: usize, noise: f64, turn: f64) -> Walk {
+/// action each step `noise`-wide uniform residuals plus `turn` on the hip-z motors, at
+/// full stride and steer `steer`.
+fn walk(map: &Map, gait: Gait, starts: u64, steps: usize, noise: f64, turn: f64, steer: f64) -> Walk {
     let (mut paces, mut yaw_rates, mut falls) = (vec![], vec![], 0);
     for seed in 0..starts {
         let mut dog = Doggo::with_gait(map, Some(gait)).expect("a Doggo on the empty map");
@@ -33,7 +38,11 @@ fn walk(map: &Map, gait: Gait, starts: u64, steps: usize, noise: f64, turn: f64)
         dog.reset(&[0.0, 0.0], &mut rng);
         let (mut last, mut turned, mut fell) = (dog.yaw(), 0.0, false);
         for _ in 0..steps {
-            let action: [f64; 12] = std::array::from_fn(|j| {
+            let action: [f64; 14] = std::array::from_fn(|j| {
+                // The gait's amplitude (0: the full stride), then its steer.
+                if j >= 12 {
+                    return if j == 13 { steer } else { 0.0 };
+                }
                 let residual = if noise > 0.0 { noise * rng.random_range(-1.0..1.0) } else { 0.0 };
                 // Hip z is every third motor; legs alternate left, right.
                 let side = if (j / 3) % 2 == 0 { 1.0 } else { -1.0 };
@@ -72,6 +81,9 @@ fn describe(name: &str, g: &Gait) -> String {
 
 fn main() {
     let map = Map::by_name("empty").expect("the empty map");
+    if std::env::args().any(|a| a == "--steer-only") {
+        return steer_sweep(&map);
+    }
     let patterns = [
         ("trot", [0.0, PI, PI, 0.0]),
         ("pace", [0.0, PI, 0.0, PI]),
@@ -86,8 +98,16 @@ fn main() {
             for ankle in [0.5, 1.0] {
                 for ankle_lag in [-PI / 2.0, 0.0, PI / 2.0, PI] {
                     for rear_reversed in [false, true] {
-                        let g = Gait { freq_hz, offsets, hip_y: 1.0, ankle, ankle_lag, rear_reversed };
-                        grid.push((name, g, walk(&map, g, 3, 300, 0.0, 0.0)));
+                        let g = Gait {
+                            freq_hz,
+                            offsets,
+                            hip_y: 1.0,
+                            ankle,
+                            ankle_lag,
+                            rear_reversed,
+                            ..Gait::PRONK
+                        };
+                        grid.push((name, g, walk(&map, g, 3, 300, 0.0, 0.0, 0.0)));
                     }
                 }
             }
@@ -111,7 +131,7 @@ fn main() {
     let mut best: Option<(f64, String)> = None;
     for (name, g, _) in &grid[..9] {
         let walks: Vec<Walk> =
-            conditions.iter().map(|(_, noise, turn)| walk(&map, *g, 12, 1000, *noise, *turn)).collect();
+            conditions.iter().map(|(_, noise, turn)| walk(&map, *g, 12, 1000, *noise, *turn, 0.0)).collect();
         let cells: Vec<String> = conditions
             .iter()
             .zip(&walks)
@@ -125,5 +145,41 @@ fn main() {
     match best {
         Some((pace, gait)) => println!("\nchosen: {gait} ({pace:.4} m/step with ±0.3 residuals, no fall)"),
         None => println!("\nno pattern walked without a fall in every condition"),
+    }
+    steer_sweep(&map);
+}
+
+/// Stage 3: the pronk's hip-z swing, by leg pattern and phase.
+fn steer_sweep(map: &Map) {
+    let patterns = [
+        ("all legs", [1.0, 1.0, 1.0, 1.0]),
+        ("left against right", [1.0, -1.0, 1.0, -1.0]),
+        ("front against rear", [1.0, 1.0, -1.0, -1.0]),
+        ("diagonals", [1.0, -1.0, -1.0, 1.0]),
+    ];
+    println!(
+        "\nstage 3: the pronk steered, 6 starts x 500 steps at steer +1 and -1 (yaw rad/step, pace m/step, falls of 6):"
+    );
+    let mut best: Option<(f64, String)> = None;
+    for (name, signs) in patterns {
+        for k in 0..8 {
+            let steer_lag = k as f64 * PI / 4.0;
+            let g = Gait { steer_lag, steer_signs: signs, ..Gait::PRONK };
+            let (left, right) = (walk(map, g, 6, 500, 0.0, 0.0, 1.0), walk(map, g, 6, 500, 0.0, 0.0, -1.0));
+            let turn = (left.yaw_rate - right.yaw_rate) / 2.0;
+            println!(
+                "  {name:<18} lag {steer_lag:.2}: +1 {:+.4} {:.4} {} | -1 {:+.4} {:.4} {} | turn {turn:+.4}",
+                left.yaw_rate, left.pace, left.falls, right.yaw_rate, right.pace, right.falls
+            );
+            if left.falls + right.falls == 0 && best.as_ref().is_none_or(|(t, _)| turn.abs() > t.abs()) {
+                best = Some((turn, format!("{name}, lag {steer_lag:.2}")));
+            }
+        }
+    }
+    match best {
+        Some((turn, pattern)) => {
+            println!("\nchosen steer: {pattern} ({turn:+.4} rad/step at steer +1, no fall)")
+        }
+        None => println!("\nno steer pattern walked without a fall"),
     }
 }

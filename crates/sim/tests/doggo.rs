@@ -16,9 +16,16 @@ fn doggo_on(map: &str) -> GoalEnv<Doggo> {
     GoalEnv::new(Doggo::with_gait(&map, None).unwrap(), map).unwrap()
 }
 
-/// Where the 12 filtered policy controls sit in the observation (the gait's phase
-/// follows them).
-const CONTROLS: std::ops::Range<usize> = OBS - 14..OBS - 2;
+/// Where the 12 filtered motor controls sit in the observation (the gait's filtered
+/// amplitude and steer actions, then its phase, follow them).
+const CONTROLS: std::ops::Range<usize> = OBS - 16..OBS - 4;
+
+/// Where the gait's filtered amplitude and steer actions sit in the observation.
+const AMPLITUDE: usize = OBS - 4;
+const STEER: usize = OBS - 3;
+
+/// Actions of a Doggo: 12 motors, the gait's amplitude and its steer.
+const ACT: usize = <Doggo as Dynamics>::ACT_DIM;
 
 /// Mass of the model (kg), from Safety-Gym's densities and sizes: two torso
 /// cylinders of density 0.5, twelve capsules of density 5.
@@ -70,7 +77,7 @@ fn a_full_control_is_a_torque_of_its_gear() {
     env.reset_into(0, Some(&[0.0, 0.0]), &mut obs).unwrap();
     assert!(obs[CONTROLS].iter().all(|c| *c == 0.0), "controls start at rest");
     assert_eq!(&obs[OBS - 2..], &[0.0, 0.0], "no gait, no phase");
-    let mut action = [0.0; 12];
+    let mut action = [0.0; ACT];
     action[4] = 1.0;
     action[9] = -0.5;
     // Held, an action reaches the motors through the filter: a fraction 1 − β^k of it
@@ -103,11 +110,11 @@ fn a_full_control_is_a_torque_of_its_gear() {
 #[test]
 fn loads_and_steps_through_make_env() {
     let mut env = make_env(Robot::Doggo, Map::by_name("walls").unwrap()).unwrap();
-    assert_eq!((env.observation_space().dim(), env.action_space().dim(), env.plan_dim()), (72, 12, 2));
+    assert_eq!((env.observation_space().dim(), env.action_space().dim(), env.plan_dim()), (74, 14, 2));
     let obs = env.reset(3, Some(&[2.0, -2.0])).unwrap();
     assert_eq!(env.position(), &[2.0, -2.0]);
     env.set_goal(&[2.0, 2.0]).unwrap();
-    let (obs2, step) = env.step(&[0.5; 12]).unwrap();
+    let (obs2, step) = env.step(&[0.5; ACT]).unwrap();
     assert!(obs.iter().chain(&obs2).all(|v| v.is_finite()));
     assert!(!step.collided && !step.fell);
     assert_ne!(obs, obs2, "the observation changes as the robot moves");
@@ -115,7 +122,7 @@ fn loads_and_steps_through_make_env() {
     let g = &obs2[56..];
     let d = (g[0] * g[0] + g[1] * g[1]).sqrt();
     assert!((d - 4.0).abs() < 0.05, "goal distance {d}");
-    assert!(env.step(&[0.0; 11]).is_err(), "a short action is refused");
+    assert!(env.step(&[0.0; ACT - 1]).is_err(), "a short action is refused");
 }
 
 /// With the policy at rest the default gait alone walks it: its reason to exist is a
@@ -129,7 +136,7 @@ fn the_default_gait_walks_with_the_policy_at_rest() {
         env.reset_into(seed, Some(&[0.0, 0.0]), &mut obs).unwrap();
         let steps = 300;
         for t in 1..=steps {
-            let s = env.step_into(&[0.0; 12], &mut obs).unwrap();
+            let s = env.step_into(&[0.0; ACT], &mut obs).unwrap();
             assert!(!s.fell, "seed {seed}: fell at step {t}");
             // The phase is observed: 10 physics steps of 0.01 s per control step.
             let (sin, cos) = gait.phase(t as f64 * 0.1).sin_cos();
@@ -142,25 +149,89 @@ fn the_default_gait_walks_with_the_policy_at_rest() {
     }
 }
 
-/// The motors get the filtered policy controls plus the gait's, clipped to ±1.
+/// The amplitude action is what lets a policy stop the gait (to turn on the spot
+/// rather than walk a circle): at −1 the Doggo stands, at 0 it walks the full gait.
 #[test]
-fn the_motors_get_the_policy_plus_the_gait_clipped() {
+fn the_amplitude_action_stops_and_starts_the_gait() {
+    let mut env = make_env(Robot::Doggo, Map::by_name("empty").unwrap()).unwrap();
+    let mut obs = vec![0.0; OBS];
+    let walked = |env: &mut Box<dyn Env>, obs: &mut Vec<f64>, amplitude: f64| {
+        let mut action = [0.0; ACT];
+        action[ACT - 2] = amplitude;
+        for _ in 0..20 {
+            env.step_into(&action, obs).unwrap();
+        }
+        let a = env.position().to_vec();
+        for _ in 0..100 {
+            assert!(!env.step_into(&action, obs).unwrap().fell);
+        }
+        let b = env.position();
+        ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt()
+    };
+    env.reset_into(4, Some(&[0.0, 0.0]), &mut obs).unwrap();
+    let stopped = walked(&mut env, &mut obs, -1.0);
+    let walking = walked(&mut env, &mut obs, 0.0);
+    assert!(stopped < 0.1, "stood still: {stopped} m in 100 steps");
+    assert!(walking > 2.0, "walked: {walking} m in 100 steps");
+}
+
+/// The steer action turns the pronk on a tight circle, left at +1 and right at −1, at
+/// many times the 0.009 rad a step that hip-z offsets alone managed (a 3 m turning
+/// radius at its pace): what lets the Doggo face a waypoint behind it without walking
+/// a wide circle into a wall first.
+#[test]
+fn the_steer_action_turns_the_doggo_on_a_tight_circle() {
+    let mut env = make_env(Robot::Doggo, Map::by_name("empty").unwrap()).unwrap();
+    let mut obs = vec![0.0; OBS];
+    for (steer, sign) in [(1.0, 1.0), (-1.0, -1.0)] {
+        env.reset_into(6, Some(&[0.0, 0.0]), &mut obs).unwrap();
+        let mut action = [0.0; ACT];
+        action[ACT - 1] = steer;
+        let (mut turned, mut last) = (0.0, env.heading());
+        for _ in 0..100 {
+            assert!(!env.step_into(&action, &mut obs).unwrap().fell);
+            let yaw = env.heading();
+            turned +=
+                (yaw - last + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+            last = yaw;
+        }
+        let p = env.position();
+        let away = (p[0] * p[0] + p[1] * p[1]).sqrt();
+        assert!(sign * turned > 4.0, "steer {steer}: turned {turned} rad in 100 steps");
+        // Over more than half a turn it stays within a circle's diameter of its start.
+        assert!(away < 1.5, "steer {steer}: ended {away} m from its start");
+    }
+}
+
+/// The motors get the filtered policy controls plus the gait's at the filtered
+/// amplitude and steer actions, clipped to ±1.
+#[test]
+fn the_motors_get_the_policy_plus_the_modulated_gait_clipped() {
     let map = Map::by_name("empty").unwrap();
     let mut env = GoalEnv::new(Doggo::with_gait(&map, Some(Gait::PRONK)).unwrap(), map).unwrap();
     let mut obs = vec![0.0; OBS];
     env.reset_into(0, Some(&[0.0, 0.0]), &mut obs).unwrap();
-    let action = [0.6; 12];
+    let mut action = [0.6; ACT];
+    action[ACT - 2] = -0.6;
     for _ in 0..3 {
         env.step_into(&action, &mut obs).unwrap();
     }
+    // Filtered over 3 steps: 0.6 · (1 − β³), so the gait runs at 1 − 0.525 of full.
+    let filtered = 0.6 * (1.0 - ACTION_FILTER.powi(3));
+    let amplitude = sim::mujoco::gait_amplitude(obs[AMPLITUDE]);
+    assert!((amplitude - (1.0 - filtered)).abs() < 1e-12, "amplitude {amplitude}");
+    assert!((obs[STEER] - filtered).abs() < 1e-12, "steer {}", obs[STEER]);
     let d = env.dynamics();
     // The controls applied in the last physics step, at the time it began.
-    let g = Gait::PRONK.controls(d.data().time() - 0.01);
+    let t = d.data().time() - 0.01;
+    let g = Gait::PRONK.controls(t, amplitude, obs[STEER]);
     for (j, c) in d.data().ctrl().iter().enumerate() {
         let want = (obs[CONTROLS.start + j] + g[j]).clamp(-1.0, 1.0);
         assert!((c - want).abs() < 1e-12, "motor {j}: {c} against {want}");
     }
-    assert!(g.iter().step_by(3).all(|u| *u == 0.0), "hip z steers, the gait leaves it alone");
+    let still = Gait::PRONK.controls(t, 0.0, 0.0);
+    assert!(still.iter().all(|u| *u == 0.0), "at amplitude 0 and steer 0 the gait is silent");
+    assert!(g.iter().step_by(3).any(|u| *u != 0.0), "the steer swings the hips about z");
 }
 
 #[test]
@@ -169,7 +240,7 @@ fn ten_thousand_random_torque_steps_stay_finite_and_bounded() {
     let mut obs = vec![0.0; OBS];
     env.reset_into(11, None, &mut obs).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let mut action = [0.0; 12];
+    let mut action = [0.0; ACT];
     let (mut falls, mut resets) = (0, 0);
     for t in 0..10_000 {
         if t % 10 == 0 {
@@ -197,7 +268,7 @@ fn stands_at_its_standing_height_with_the_motors_off() {
     let mut env = doggo_on("walls");
     let mut obs = vec![0.0; OBS];
     env.reset_into(2, Some(&[2.0, -2.0]), &mut obs).unwrap();
-    let zero = [0.0; 12];
+    let zero = [0.0; ACT];
     // It drops from Safety-Gym's start height onto its feet; the rear hips then give
     // way slowly to the body's weight against their springs.
     for _ in 0..300 {
@@ -232,7 +303,7 @@ fn foot_touch_sensors_fire_when_the_feet_rest_on_the_floor() {
     let mut obs = vec![0.0; OBS];
     env.reset_into(4, Some(&[0.0, 0.0]), &mut obs).unwrap();
     for _ in 0..100 {
-        env.step_into(&[0.0; 12], &mut obs).unwrap();
+        env.step_into(&[0.0; ACT], &mut obs).unwrap();
     }
     let touch = env.dynamics().touch();
     assert_eq!(&obs[12..20], &touch, "the observation carries the touch sensors");
@@ -248,8 +319,8 @@ fn foot_touch_sensors_fire_when_the_feet_rest_on_the_floor() {
     let mut lifted = saved.clone();
     lifted["robot"]["qpos"][2] = serde_json::json!(1.0);
     env.restore_state(&lifted.to_string()).unwrap();
-    env.step_into(&[0.0; 12], &mut obs).unwrap();
-    env.step_into(&[0.0; 12], &mut obs).unwrap();
+    env.step_into(&[0.0; ACT], &mut obs).unwrap();
+    env.step_into(&[0.0; ACT], &mut obs).unwrap();
     assert!(env.dynamics().touch().iter().all(|f| *f == 0.0));
 }
 
@@ -269,13 +340,13 @@ fn a_fall_is_reported_and_ends_the_episode() {
     let upside_down = [0.0, 1.0, 0.0, 0.0];
     // The low-torso rule: on the floor is a fall at once.
     env.reset_into(1, Some(&[0.0, 0.0]), &mut obs).unwrap();
-    assert!(!env.step_into(&[0.0; 12], &mut obs).unwrap().fell);
+    assert!(!env.step_into(&[0.0; ACT], &mut obs).unwrap().fell);
     teleport(&mut env, [0.0, 0.0, FALL_HEIGHT - 0.03], [1.0, 0.0, 0.0, 0.0]);
-    assert!(env.step_into(&[0.0; 12], &mut obs).unwrap().fell, "torso on the floor is a fall");
+    assert!(env.step_into(&[0.0; ACT], &mut obs).unwrap().fell, "torso on the floor is a fall");
     // Dropped upside down from 0.3 m, it lands on its back: a fall.
     env.reset_into(1, Some(&[0.0, 0.0]), &mut obs).unwrap();
     teleport(&mut env, [0.0, 0.0, 0.3], upside_down);
-    let s = (0..10).map(|_| env.step_into(&[0.0; 12], &mut obs).unwrap()).find(|s| s.fell);
+    let s = (0..10).map(|_| env.step_into(&[0.0; ACT], &mut obs).unwrap()).find(|s| s.fell);
     assert!(s.is_some_and(|s| s.terminated()), "on its back within a second is a fall");
 }
 
@@ -284,18 +355,18 @@ fn a_diverged_physics_step_ends_the_episode_where_the_robot_was() {
     let mut env = doggo_on("empty");
     let mut obs = vec![0.0; OBS];
     env.reset_into(1, Some(&[1.0, -1.0]), &mut obs).unwrap();
-    env.step_into(&[0.0; 12], &mut obs).unwrap();
+    env.step_into(&[0.0; ACT], &mut obs).unwrap();
     let at = env.position().to_vec();
     // A velocity past MuJoCo's bound: it warns and resets the data to the model's start.
     let mut s: serde_json::Value = serde_json::from_str(&env.save_state()).unwrap();
     s["robot"]["qvel"][0] = serde_json::json!(1e12);
     env.restore_state(&s.to_string()).unwrap();
-    let step = env.step_into(&[0.0; 12], &mut obs).unwrap();
+    let step = env.step_into(&[0.0; ACT], &mut obs).unwrap();
     assert!(step.fell && step.terminated());
     assert_eq!(env.position(), &at[..], "not teleported to the model's start");
     // A reset clears it.
     env.reset_into(2, Some(&[1.0, -1.0]), &mut obs).unwrap();
-    assert!(!env.step_into(&[0.0; 12], &mut obs).unwrap().fell);
+    assert!(!env.step_into(&[0.0; ACT], &mut obs).unwrap().fell);
 }
 
 /// Holds the Doggo upside down 0.3 m up, at rest, for one control step (0.1 s: it
@@ -307,7 +378,7 @@ fn held_over(env: &mut GoalEnv<Doggo>, obs: &mut [f64]) -> bool {
         *v = serde_json::json!(0.0);
     }
     env.restore_state(&s.to_string()).unwrap();
-    env.step_into(&[0.0; 12], obs).unwrap().fell
+    env.step_into(&[0.0; ACT], obs).unwrap().fell
 }
 
 #[test]
@@ -321,7 +392,7 @@ fn a_tilt_is_a_fall_only_once_it_has_lasted_fall_tilt_seconds() {
         assert!(!held_over(&mut env, &mut obs), "{step} control steps over is not a fall");
     }
     teleport(&mut env, [0.0, 0.0, 0.22], [1.0, 0.0, 0.0, 0.0]);
-    assert!(!env.step_into(&[0.0; 12], &mut obs).unwrap().fell, "righted");
+    assert!(!env.step_into(&[0.0; ACT], &mut obs).unwrap().fell, "righted");
     for step in 1..over {
         assert!(!held_over(&mut env, &mut obs), "{step} control steps over again is not a fall");
     }
@@ -338,16 +409,16 @@ fn touching_a_wall_is_a_collision() {
     let mut obs = vec![0.0; OBS];
     // Beside the wall square at (3, 0), 0.35 m from it: nothing touches.
     env.reset_into(1, Some(&[3.0, -0.8]), &mut obs).unwrap();
-    let s = env.step_into(&[0.0; 12], &mut obs).unwrap();
+    let s = env.step_into(&[0.0; ACT], &mut obs).unwrap();
     assert!(!s.collided);
     // With its centre 0.05 m from the wall the left feet are inside it.
     teleport(&mut env, [3.0, -0.3, 0.17], [1.0, 0.0, 0.0, 0.0]);
-    assert!(env.step_into(&[0.0; 12], &mut obs).unwrap().collided);
+    assert!(env.step_into(&[0.0; ACT], &mut obs).unwrap().collided);
     // The same spot on the empty map touches nothing.
     let mut open = doggo_on("empty");
     open.reset_into(1, Some(&[3.0, -0.8]), &mut obs).unwrap();
     teleport(&mut open, [3.0, -0.3, 0.17], [1.0, 0.0, 0.0, 0.0]);
-    assert!(!open.step_into(&[0.0; 12], &mut obs).unwrap().collided);
+    assert!(!open.step_into(&[0.0; ACT], &mut obs).unwrap().collided);
 }
 
 #[test]
@@ -357,7 +428,7 @@ fn saved_state_resumes_bit_for_bit() {
     let mut obs = vec![0.0; OBS];
     env.reset_into(9, None, &mut obs).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let actions: Vec<[f64; 12]> =
+    let actions: Vec<[f64; ACT]> =
         (0..120).map(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0))).collect();
     for a in &actions[..60] {
         env.step_into(a, &mut obs).unwrap();
@@ -515,10 +586,10 @@ fn doggos_stepped_in_parallel_match_doggos_stepped_one_by_one() {
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mut steps = vec![Step::default(); n];
     for t in 0..50 {
-        let actions: Vec<f64> = (0..n * 12).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let actions: Vec<f64> = (0..n * ACT).map(|_| rng.random_range(-1.0..1.0)).collect();
         pool.install(|| v.step_all(&actions, &mut obs, &mut steps)).unwrap();
         for (i, env) in alone.iter_mut().enumerate() {
-            let s = env.step_into(&actions[i * 12..(i + 1) * 12], &mut one).unwrap();
+            let s = env.step_into(&actions[i * ACT..(i + 1) * ACT], &mut one).unwrap();
             assert_eq!(&obs[i * OBS..(i + 1) * OBS], &one[..], "env {i} at step {t}");
             assert_eq!(steps[i].fell, s.fell);
         }

@@ -80,7 +80,14 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<ControlTrainer, StoreError> {
     let env_err = |e: sim::EnvError| bad(e.to_string());
     let mut envs = VecEnv::new(robot, map, n, 0).map_err(env_err)?;
     if envs.obs_dim() != state.obs_dim || envs.act_dim() != state.act_dim {
-        return Err(bad(format!("the {robot} does not have {} observations", state.obs_dim)));
+        return Err(bad(format!(
+            "saved for a {robot} with {} observations and {} actions, but this build's {robot} has {} and {}: \
+             its model changed since this controller was trained; train it again",
+            state.obs_dim,
+            state.act_dim,
+            envs.obs_dim(),
+            envs.act_dim()
+        )));
     }
     if state.env_states.len() != n
         || state.raw_obs.len() != n * state.obs_dim

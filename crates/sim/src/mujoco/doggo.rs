@@ -1,4 +1,5 @@
-//! Doggo: the paper's quadruped (observation 72, action 12), on MuJoCo.
+//! Doggo: the paper's quadruped (observation 74, action 14: 12 motors and the gait's
+//! amplitude and steer), on MuJoCo.
 //!
 //! The model is `assets/doggo.xml` ([`DOGGO_XML`]): Safety-Gym's Doggo, written for
 //! this project from the facts of its public MJCF; the walls of the map are added to
@@ -17,17 +18,22 @@
 //! | touch sensors | 8: each lower leg's ankle and foot | Safety-Gym's `doggo.xml` |
 //! | reach radius | 0.3 m | reference setup |
 //!
-//! Observation (72): accelerometer, velocimeter, gyro, magnetometer (3 each, front
+//! Observation (74): accelerometer, velocimeter, gyro, magnetometer (3 each, front
 //! torso frame), the 8 touch sensors, the velocities of the 12 motor joints, the sines
 //! and then the cosines of their angles, the goal vector in the robot's yaw frame (2),
-//! the 12 filtered policy controls, and the sine and cosine of the gait's phase (zeros
+//! the 14 filtered policy actions, and the sine and cosine of the gait's phase (zeros
 //! without a gait); the passive waist is not observed, as in Safety-Gym.
 //! Actions are the 12 motor commands in the order front-left, front-right, back-left,
-//! back-right, each leg hip z, hip y, ankle; they pass through a low-pass filter
-//! ([`ACTION_FILTER`]) and, with a [`Gait`] (the default, [`GAIT`]), are added to the
-//! gait's open-loop controls at every physics step, so the policy learns a residual on
-//! a rhythm that already walks. Safety-Gym's 58 observations and controls are this with
-//! β = 0, no gait, and neither the controls nor the phase observed.
+//! back-right, each leg hip z, hip y, ankle, then the gait's amplitude `a` and steer;
+//! all 14 pass through a low-pass filter ([`ACTION_FILTER`]). With a [`Gait`] (the
+//! default, [`GAIT`]) the motors get the filtered commands plus the gait's open-loop
+//! controls at every physics step, its stride scaled by `clamp(1 + a, 0, 1)` and its
+//! hip-z swing by the steer, so the policy learns a residual on a rhythm that already
+//! walks at full stride with actions 0, and can stop it (`a = −1`) and turn it, as
+//! PMTG's policy modulates its trajectory generator; without a gait the 13th and 14th
+//! actions do nothing. Safety-Gym's 58
+//! observations and 12 controls are this with β = 0, no gait, and neither the controls
+//! nor the phase observed.
 //!
 //! A fall — the torso's centre below [`FALL_HEIGHT`], or the front torso tilted past 60°
 //! ([`FALL_TILT_COS`]) for [`FALL_TILT_SECONDS`] without a break: on its side or upside
@@ -72,12 +78,16 @@ pub const FALL_TILT_COS: f64 = 0.5;
 pub const FALL_TILT_SECONDS: f64 = 2.0;
 
 /// An open-loop gait: each physics step, the hip-y and ankle motors of every leg get
-/// `hip_y · s · sin φ_leg` and `ankle · sin(φ_leg + ankle_lag)` on top of the policy's
-/// filtered controls (the sum clipped to the control range), where `φ_leg = 2π f t +
-/// offset_leg`, `t` the simulated time since the reset and `s` −1 on the rear legs when
-/// `rear_reversed`. The hip-z motors, which steer, are the policy's alone. A gait prior
-/// in the manner of PMTG (Iscen et al. 2018), simplified to a fixed rhythm: the policy
-/// does not modulate it, it corrects and steers it.
+/// `A · hip_y · s · sin φ_leg` and `A · ankle · sin(φ_leg + ankle_lag)`, and its hip-z
+/// motor `S · steer_signs_leg · sin(φ_leg + steer_lag)`, on top of the policy's filtered
+/// controls (the sum clipped to the control range), where `φ_leg = 2π f t + offset_leg`,
+/// `t` the simulated time since the reset, `s` −1 on the rear legs when `rear_reversed`,
+/// and `A` ∈ [0, 1] and `S` ∈ [−1, 1] the amplitude and steer the policy sets (its 13th
+/// and 14th actions, [`gait_amplitude`]). A gait prior in the manner of PMTG (Iscen et
+/// al. 2018): the rhythm is fixed, the policy modulates its stride and its turning and
+/// adds a residual. The steer is a swing in step with the stride because a turn made
+/// of hip-z offsets set once a control step (10 Hz, filtered) cannot follow a 4 Hz
+/// stride: the pronk steered that way turned 0.009 rad a step at most.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Gait {
     /// Cycles per second.
@@ -93,6 +103,13 @@ pub struct Gait {
     /// Whether the rear hips swing against the front ones (their ranges face the other
     /// way: front −75°..15°, rear 0°..135°).
     pub rear_reversed: bool,
+    /// The hip-z swing's phase relative to its hip-y swing (rad).
+    #[serde(default)]
+    pub steer_lag: f64,
+    /// Each leg's hip-z swing at steer +1 (front-left, front-right, back-left,
+    /// back-right); zeros: the gait does not steer (gaits saved before it could).
+    #[serde(default)]
+    pub steer_signs: [f64; 4],
 }
 
 impl Gait {
@@ -100,7 +117,11 @@ impl Gait {
     /// rear hips reversed. Chosen by an open-loop sweep (zero policy action; 6 leg
     /// patterns × 2–8 Hz × ankle amplitude and lag × rear sign, then the leaders on 12
     /// starts of 1000 steps, straight, with ±0.3 random residuals, and steered by hip z):
-    /// the fastest with no fall in any of those conditions (README's Doggo section).
+    /// the fastest with no fall in any of those conditions. Its steer, the left hips
+    /// swinging against the right half a cycle from the stride, turns it 0.072 rad a
+    /// control step at steer +1 (to the left) on a circle of about 0.5 m radius: the
+    /// fastest turn with no fall of 4 leg patterns × 8 phases (the sweep's stage 3;
+    /// README's Doggo section).
     pub const PRONK: Gait = Gait {
         freq_hz: 4.0,
         offsets: [0.0; 4],
@@ -108,6 +129,8 @@ impl Gait {
         ankle: 1.0,
         ankle_lag: std::f64::consts::PI,
         rear_reversed: true,
+        steer_lag: std::f64::consts::PI,
+        steer_signs: [1.0, -1.0, 1.0, -1.0],
     };
 
     /// Its phase (rad) at simulated time `t`.
@@ -115,17 +138,26 @@ impl Gait {
         2.0 * std::f64::consts::PI * self.freq_hz * t
     }
 
-    /// Its controls at simulated time `t`, in action order.
-    pub fn controls(&self, t: f64) -> [f64; JOINTS] {
+    /// Its controls at simulated time `t`, in action order, at stride amplitude
+    /// `amplitude` (0–1) and steer `steer` (−1–1).
+    pub fn controls(&self, t: f64, amplitude: f64, steer: f64) -> [f64; JOINTS] {
         let mut u = [0.0; JOINTS];
         for (leg, offset) in self.offsets.iter().enumerate() {
             let phi = self.phase(t) + offset;
             let sign = if leg >= 2 && self.rear_reversed { -1.0 } else { 1.0 };
-            u[3 * leg + 1] = sign * self.hip_y * phi.sin();
-            u[3 * leg + 2] = self.ankle * (phi + self.ankle_lag).sin();
+            u[3 * leg] = steer * self.steer_signs[leg] * (phi + self.steer_lag).sin();
+            u[3 * leg + 1] = amplitude * sign * self.hip_y * phi.sin();
+            u[3 * leg + 2] = amplitude * self.ankle * (phi + self.ankle_lag).sin();
         }
         u
     }
+}
+
+/// The scale of the gait's controls for the filtered amplitude action `a`:
+/// `clamp(1 + a, 0, 1)`, so an untrained policy (mean action 0) walks the full gait and
+/// `a = −1` stands still on the policy's controls alone.
+pub fn gait_amplitude(a: f64) -> f64 {
+    (1.0 + a).clamp(0.0, 1.0)
 }
 
 /// The gait a Doggo walks with unless told otherwise ([`Doggo::with_gait`]).
@@ -145,6 +177,8 @@ const WALL_HALF_HEIGHT: f64 = 0.25;
 const SENSORS: usize = 20;
 /// Motor joints (observed and driven).
 const JOINTS: usize = 12;
+/// Policy actions: one per motor, then the gait's amplitude and steer.
+const ACTIONS: usize = JOINTS + 2;
 /// Passive joints: the waist.
 const PASSIVE: usize = 1;
 /// Free joint: 7 position numbers (x, y, z, quaternion w x y z), 6 velocity numbers.
@@ -238,9 +272,9 @@ pub struct Doggo {
     fallen: bool,
     /// Simulated time at which the current tilt past 60° began (none: upright).
     tilted_since: Option<f64>,
-    /// The policy's controls after the low-pass filter; the motors get these plus the
-    /// gait's.
-    filtered: [f64; JOINTS],
+    /// The policy's actions after the low-pass filter: the motors get the first 12 plus
+    /// the gait's controls at [`gait_amplitude`] of the 13th and the 14th's steer.
+    filtered: [f64; ACTIONS],
     gait: Option<Gait>,
 }
 
@@ -263,7 +297,7 @@ impl Doggo {
             pos: [0.0; 2],
             fallen: false,
             tilted_since: None,
-            filtered: [0.0; JOINTS],
+            filtered: [0.0; ACTIONS],
             gait,
         };
         dog.place([0.0, 0.0], 0.0);
@@ -334,13 +368,15 @@ impl Doggo {
         self.pos = xy;
         self.fallen = false;
         self.tilted_since = None;
-        self.filtered = [0.0; JOINTS];
+        self.filtered = [0.0; ACTIONS];
     }
 
     /// Sets the motors' controls for a physics step at simulated time `t`: the filtered
-    /// policy controls plus the gait's, clipped to the control range.
+    /// policy controls plus the gait's at the filtered amplitude, clipped to the
+    /// control range.
     fn drive(&mut self, t: f64) {
-        let gait = self.gait.map_or([0.0; JOINTS], |g| g.controls(t));
+        let (amplitude, steer) = (gait_amplitude(self.filtered[JOINTS]), self.filtered[JOINTS + 1]);
+        let gait = self.gait.map_or([0.0; JOINTS], |g| g.controls(t, amplitude, steer));
         for ((c, f), g) in self.data.ctrl_mut().iter_mut().zip(&self.filtered).zip(gait) {
             *c = (f + g).clamp(-1.0, 1.0);
         }
@@ -379,8 +415,13 @@ impl Doggo {
         len("qpos", s.qpos.len(), NQ)?;
         len("qvel", s.qvel.len(), NV)?;
         len("ctrl", s.ctrl.len(), JOINTS)?;
-        let filtered = s.filtered.as_ref().unwrap_or(&s.ctrl);
-        len("filtered", filtered.len(), JOINTS)?;
+        // States saved before the gait's amplitude and steer actions hold 12 filtered
+        // controls: their gait ran at full amplitude without steering, actions 0.
+        let mut filtered = s.filtered.clone().unwrap_or_else(|| s.ctrl.clone());
+        if filtered.len() == JOINTS {
+            filtered.extend([0.0, 0.0]);
+        }
+        len("filtered", filtered.len(), ACTIONS)?;
         len("qacc_warmstart", s.qacc_warmstart.len(), NV)?;
         len("sensordata", s.sensordata.len(), SENSORS)?;
         self.data.set_time(s.time);
@@ -395,7 +436,7 @@ impl Doggo {
         self.pos = [s.qpos[0], s.qpos[1]];
         self.fallen = s.fallen;
         self.tilted_since = s.tilted_since;
-        self.filtered.copy_from_slice(filtered);
+        self.filtered.copy_from_slice(&filtered);
         self.gait = s.gait;
         Ok(())
     }
@@ -410,8 +451,9 @@ struct DoggoState {
     qpos: Vec<f64>,
     qvel: Vec<f64>,
     ctrl: Vec<f64>,
-    /// The filtered policy controls; absent in states saved before the gait, whose
-    /// controls were the filtered policy's.
+    /// The filtered policy actions (12 in states saved before the gait's actions);
+    /// absent in states saved before the gait, whose controls were the filtered
+    /// policy's.
     #[serde(default)]
     filtered: Option<Vec<f64>>,
     /// Absent in states saved before the gait: none.
@@ -444,8 +486,8 @@ impl<'de> Deserialize<'de> for Doggo {
 
 impl Dynamics for Doggo {
     const NAME: &'static str = NAME;
-    const OBS_DIM: usize = SENSORS + 3 * JOINTS + 2 + JOINTS + 2;
-    const ACT_DIM: usize = JOINTS;
+    const OBS_DIM: usize = SENSORS + 3 * JOINTS + 2 + ACTIONS + 2;
+    const ACT_DIM: usize = ACTIONS;
     const PLAN_DIM: usize = 2;
     const REACH_RADIUS: f64 = 0.3;
     /// Standing, the front knees' capsules reach 0.357 m from the centre (the farthest
@@ -518,8 +560,8 @@ impl Dynamics for Doggo {
         let g = Heading::new(self.yaw()).to_body(to_goal);
         obs[SENSORS + 3 * JOINTS..SENSORS + 3 * JOINTS + 2].copy_from_slice(&g);
         let controls = SENSORS + 3 * JOINTS + 2;
-        obs[controls..controls + JOINTS].copy_from_slice(&self.filtered);
+        obs[controls..controls + ACTIONS].copy_from_slice(&self.filtered);
         let (s, c) = self.gait.map_or((0.0, 0.0), |g| g.phase(self.data.time()).sin_cos());
-        obs[controls + JOINTS..].copy_from_slice(&[s, c]);
+        obs[controls + ACTIONS..].copy_from_slice(&[s, c]);
     }
 }

@@ -20,7 +20,7 @@ mod point_twin;
 pub use car_twin::{CAR_TWIN_XML, CarTwin};
 pub use doggo::{
     ACTION_FILTER, DOGGO_XML, Doggo, FALL_HEIGHT, FALL_TILT_COS, FALL_TILT_SECONDS, GAIT, Gait,
-    STANDING_HEIGHT,
+    STANDING_HEIGHT, gait_amplitude,
 };
 pub use point_twin::{POINT_TWIN_XML, PointTwin};
 
