@@ -154,8 +154,8 @@ impl Gait {
 }
 
 /// The scale of the gait's controls for the filtered amplitude action `a`:
-/// `clamp(1 + a, 0, 1)`, so an untrained policy (mean action 0) walks the full gait and
-/// `a = −1` stands still on the policy's controls alone.
+/// `clamp(1 + a, 0, 1)`, so an untrained policy (mean action 0) walks the full stride
+/// and `a = −1` stops it (the steer's hip-z swing is set apart, by the 14th action).
 pub fn gait_amplitude(a: f64) -> f64 {
     (1.0 + a).clamp(0.0, 1.0)
 }
