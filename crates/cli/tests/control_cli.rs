@@ -34,6 +34,8 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
         "16,8",
         "--fall-penalty",
         "5",
+        "--off-track-weight",
+        "0.2",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stdout(&o).contains("success rate: "), "{}", stdout(&o));
@@ -45,6 +47,7 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
     assert_eq!(manifest["kind"], "controller");
     assert_eq!(manifest["settings"]["ppo"]["hidden"], serde_json::json!([16, 8]));
     assert_eq!(manifest["settings"]["fall_penalty"], 5.0);
+    assert_eq!(manifest["settings"]["off_track_weight"], 0.2);
     for f in ["controller.safetensors", "controller.json"] {
         assert!(manifest["files"][f]["sha256"].is_string(), "{f} not in the manifest");
     }

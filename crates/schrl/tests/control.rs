@@ -160,9 +160,11 @@ fn save_run(dir: &std::path::Path, t: &ControlTrainer) {
 fn resuming_from_a_checkpoint_continues_exactly() {
     let scratch = tempfile::tempdir().unwrap();
     let dir = scratch.path().join("control-resume");
-    // Near goals too: their draws come from the checkpointed random streams.
+    // Near goals too: their draws come from the checkpointed random streams; and the
+    // off-track penalty, measured from where each environment's goal was set.
     let cfg = ControlConfig {
         near_goals: Some(NearGoals { fraction: 0.5, within: 1.0 }),
+        off_track_weight: 0.2,
         ..tiny_config(Robot::Car, 8, 8000)
     };
     let mut straight = ControlTrainer::new(cfg.clone()).unwrap();
@@ -228,6 +230,9 @@ fn bad_configurations_name_the_field() {
         let mut c = tiny_config(Robot::Point, 0, 1000);
         c.fall_penalty = bad;
         assert!(ControlTrainer::new(c).err().unwrap().to_string().contains("fall_penalty"), "{bad}");
+        let mut c = tiny_config(Robot::Point, 0, 1000);
+        c.off_track_weight = bad;
+        assert!(ControlTrainer::new(c).err().unwrap().to_string().contains("off_track_weight"), "{bad}");
     }
 }
 

@@ -214,6 +214,9 @@ pub trait Env: Send {
     fn set_goal(&mut self, goal: &[f64]) -> Result<(), EnvError>;
     /// The current goal.
     fn goal(&self) -> &[f64];
+    /// Where the robot was when the current goal was set (its start after a reset):
+    /// with [`Env::goal`], the straight segment a robot that heads for its goal drives.
+    fn goal_origin(&self) -> &[f64];
     /// The robot's position in plan space.
     fn position(&self) -> &[f64];
     /// The robot's heading: yaw about the vertical axis (rad).
@@ -300,6 +303,7 @@ pub struct GoalEnv<D: Dynamics> {
     robot: D,
     map: Map,
     goal: Vec<f64>,
+    goal_origin: Vec<f64>,
     prev_dist: f64,
     goal_reached: bool,
     reach_radius: f64,
@@ -325,6 +329,7 @@ impl<D: Dynamics> GoalEnv<D> {
             robot,
             map,
             goal: vec![0.0; D::PLAN_DIM],
+            goal_origin: vec![0.0; D::PLAN_DIM],
             prev_dist: 0.0,
             goal_reached: false,
             reach_radius: D::REACH_RADIUS,
@@ -433,6 +438,7 @@ impl<D: Dynamics> Env for GoalEnv<D> {
             None => self.free_point(),
         };
         self.robot.reset(&start, &mut self.rng);
+        self.goal_origin.copy_from_slice(self.robot.plan_position());
         self.goal = self.free_point();
         self.goal_reached = false;
         self.prev_dist = self.distance();
@@ -472,6 +478,7 @@ impl<D: Dynamics> Env for GoalEnv<D> {
     fn set_goal(&mut self, goal: &[f64]) -> Result<(), EnvError> {
         Self::check_point("goal", goal)?;
         self.goal.copy_from_slice(goal);
+        self.goal_origin.copy_from_slice(self.robot.plan_position());
         self.goal_reached = false;
         self.prev_dist = self.distance();
         Ok(())
@@ -479,6 +486,10 @@ impl<D: Dynamics> Env for GoalEnv<D> {
 
     fn goal(&self) -> &[f64] {
         &self.goal
+    }
+
+    fn goal_origin(&self) -> &[f64] {
+        &self.goal_origin
     }
 
     fn position(&self) -> &[f64] {
@@ -531,6 +542,7 @@ impl<D: Dynamics> Env for GoalEnv<D> {
             robot_name: D::NAME.to_string(),
             robot: self.robot.clone(),
             goal: self.goal.clone(),
+            goal_origin: Some(self.goal_origin.clone()),
             prev_dist: self.prev_dist,
             goal_reached: self.goal_reached,
             steps: self.steps,
@@ -549,6 +561,10 @@ impl<D: Dynamics> Env for GoalEnv<D> {
         Self::check_point("goal", &s.goal)?;
         self.robot = s.robot;
         self.goal = s.goal;
+        // States saved before it existed: the robot's position stands in for it.
+        let origin = s.goal_origin.unwrap_or_else(|| self.robot.plan_position().to_vec());
+        Self::check_point("goal origin", &origin)?;
+        self.goal_origin = origin;
         self.prev_dist = s.prev_dist;
         self.goal_reached = s.goal_reached;
         self.steps = s.steps;
@@ -564,6 +580,8 @@ struct SavedState<D> {
     robot_name: String,
     robot: D,
     goal: Vec<f64>,
+    #[serde(default)]
+    goal_origin: Option<Vec<f64>>,
     prev_dist: f64,
     goal_reached: bool,
     steps: usize,

@@ -184,6 +184,36 @@ fn saved_state_restores_bit_for_bit() {
 }
 
 #[test]
+fn goal_origin_is_where_the_goal_was_set_and_survives_a_restore() {
+    for robot in Robot::NATIVE {
+        let mut env = make_env(robot, robot.default_map()).unwrap();
+        env.reset(3, None).unwrap();
+        assert_eq!(env.goal_origin(), env.position(), "{robot}: a reset's goal is set at the start");
+        let act = vec![0.5; env.action_space().dim()];
+        for _ in 0..30 {
+            env.step(&act).unwrap();
+        }
+        let here = env.position().to_vec();
+        assert_ne!(env.goal_origin(), &here[..], "{robot} should have moved");
+        let goal = env.sample_goal();
+        env.set_goal(&goal).unwrap();
+        assert_eq!(env.goal_origin(), &here[..], "{robot}");
+        for _ in 0..10 {
+            env.step(&act).unwrap();
+        }
+        let saved = env.save_state();
+        let mut fresh = make_env(robot, robot.default_map()).unwrap();
+        fresh.restore_state(&saved).unwrap();
+        assert_eq!(fresh.goal_origin(), &here[..], "{robot}");
+        // A state saved before the origin was kept: the robot's position stands in.
+        let mut old: serde_json::Value = serde_json::from_str(&saved).unwrap();
+        old.as_object_mut().unwrap().remove("goal_origin").expect("saved states hold the origin");
+        fresh.restore_state(&old.to_string()).unwrap();
+        assert_eq!(fresh.goal_origin(), fresh.position(), "{robot}");
+    }
+}
+
+#[test]
 fn restoring_another_robots_state_is_an_error_and_changes_nothing() {
     let point = make_env(Robot::Point, Map::by_name("empty").unwrap()).unwrap();
     let mut car = make_env(Robot::Car, Map::by_name("empty").unwrap()).unwrap();

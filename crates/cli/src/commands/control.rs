@@ -62,6 +62,10 @@ pub struct TrainArgs {
     /// reward].
     #[arg(long, value_name = "REWARD")]
     fall_penalty: Option<f64>,
+    /// Reward PPO loses per step per metre the robot strays from the straight segment
+    /// between where its goal was set and the goal (0: the paper's reward) [default: 0].
+    #[arg(long)]
+    off_track_weight: Option<f64>,
     #[command(flatten)]
     run: super::RunDirArgs,
     /// Save a checkpoint every this many updates (and at the end).
@@ -146,6 +150,7 @@ impl TrainArgs {
         config.goal = self.goal.clone();
         config.near_goals = self.near_goals(config.near_goals);
         config.fall_penalty = self.fall_penalty.unwrap_or(config.fall_penalty);
+        config.off_track_weight = self.off_track_weight.unwrap_or(config.off_track_weight);
         Ok(config)
     }
 
@@ -182,6 +187,7 @@ impl TrainArgs {
                         && self.near_goals(saved.near_goals) != saved.near_goals,
                 ),
                 ("--fall-penalty", differs(&self.fall_penalty, &saved.fall_penalty)),
+                ("--off-track-weight", differs(&self.off_track_weight, &saved.off_track_weight)),
             ],
         )?;
         Ok(ControlConfig { total_steps: self.steps.unwrap_or(saved.total_steps), ..saved.clone() })

@@ -112,6 +112,10 @@ pub struct TrainArgs {
     /// planned segment, never past its waypoint) [default: waypoints].
     #[arg(long, value_name = "waypoints|carrot:METRES")]
     follow: Option<Follow>,
+    /// Reward the joint phase's controller loses per step per metre it strays from the
+    /// planned segment it drives (0: the paper's reward) [default: 0].
+    #[arg(long)]
+    off_track_weight: Option<f64>,
     /// Weight per metre of the path-length term the planner follows in the joint phase
     /// [default: 0.05].
     #[arg(long)]
@@ -199,6 +203,7 @@ impl TrainArgs {
         set(&mut j.control_lr, self.control_lr.map(Some));
         set(&mut j.control_target_kl, self.control_target_kl.map(Some));
         set(&mut j.follow, self.follow);
+        set(&mut j.off_track_weight, self.off_track_weight);
         set(&mut j.length_weight, self.length_weight);
         j.freeze_planner = self.freeze_planner;
         j.freeze_controller = self.freeze_controller;
@@ -304,6 +309,7 @@ impl TrainArgs {
                     differs(&self.control_target_kl.map(Some), &saved.joint.control_target_kl),
                 ),
                 ("--follow", differs(&self.follow, &saved.joint.follow)),
+                ("--off-track-weight", differs(&self.off_track_weight, &saved.joint.off_track_weight)),
                 ("--length-weight", differs(&self.length_weight, &saved.joint.length_weight)),
                 ("--anchor-weight", differs(&self.anchor_weight, &saved.joint.anchor_weight)),
                 ("--anchor-on", differs(&self.anchor_on, &saved.joint.anchor_on)),

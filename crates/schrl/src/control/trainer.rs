@@ -54,6 +54,14 @@ pub struct ControlConfig {
     /// only: the joint phase's controller updates learn from the environment's reward.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub fall_penalty: f64,
+    /// Subtracted, times the robot's distance (m) from the straight segment between
+    /// where its goal was set and the goal ([`sim::Env::goal_origin`]), from the reward
+    /// PPO learns from on every step (the logged returns stay the environment's). 0, the
+    /// default: the paper's reward, under which a robot may arc to a goal behind it
+    /// as freely as turn first; a plan's segments are only clear of walls close to the
+    /// straight line (README, *Following the planned segments*).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub off_track_weight: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -99,6 +107,7 @@ impl ControlConfig {
             goal: None,
             near_goals: None,
             fall_penalty: 0.0,
+            off_track_weight: 0.0,
         }
     }
 }
@@ -232,11 +241,12 @@ impl ControlTrainer {
                 "near_goals: fraction must be in [0, 1] and within a positive number of metres, got {n:?}"
             )));
         }
-        if !(config.fall_penalty >= 0.0 && config.fall_penalty.is_finite()) {
-            return Err(ControlError::Config(format!(
-                "fall_penalty must be a finite number ≥ 0, got {}",
-                config.fall_penalty
-            )));
+        for (key, value) in
+            [("fall_penalty", config.fall_penalty), ("off_track_weight", config.off_track_weight)]
+        {
+            if !(value >= 0.0 && value.is_finite()) {
+                return Err(ControlError::Config(format!("{key} must be a finite number ≥ 0, got {value}")));
+            }
         }
         if let Some(g) = &config.goal {
             let (low, high) = map.region();
@@ -385,6 +395,11 @@ impl ControlTrainer {
             {
                 let s = reports[i];
                 rewards[i] = s.reward - if s.fell { self.config.fall_penalty } else { 0.0 };
+                if self.config.off_track_weight > 0.0 {
+                    let off =
+                        sim::segment::point_segment_distance(env.position(), env.goal_origin(), env.goal());
+                    rewards[i] -= self.config.off_track_weight * off;
+                }
                 self.episode_returns[i] += s.reward;
                 if s.reached {
                     reached += 1;

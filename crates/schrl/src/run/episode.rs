@@ -19,9 +19,10 @@ pub trait Driver {
     /// `live`: which runs are still going) into `actions` (`n × act_dim`).
     fn act(&mut self, raw: &[f64], live: &[bool], actions: &mut [f64]);
 
-    /// After every live environment stepped: each one's reward (0 for runs already
-    /// over) and whether its run ended in this step.
-    fn after_step(&mut self, _live: &[bool], _rewards: &mut [f64], _ended: &[bool]) {}
+    /// After every live environment stepped: each one's reward, its distance (m) from
+    /// the planned segment it was driving in this step (both 0 for runs already over),
+    /// and whether its run ended in this step.
+    fn after_step(&mut self, _live: &[bool], _rewards: &mut [f64], _off_track: &[f64], _ended: &[bool]) {}
 }
 
 /// A trained controller's mean actions: how deployed runs and evaluations drive.
@@ -104,6 +105,7 @@ pub(crate) fn drive_threaded(
     let mut live: Vec<bool> = runs.iter().map(|r| r.dispatcher.outcome().is_none()).collect();
     let mut actions = vec![0.0; n * ad];
     let mut rewards = vec![0.0; n];
+    let mut off_track = vec![0.0; n];
     let mut ended = vec![false; n];
     let mut stepped: Vec<Result<Option<StepReport>, EnvError>> = Vec::with_capacity(n);
     let envs = &mut envs[..n];
@@ -127,10 +129,11 @@ pub(crate) fn drive_threaded(
         for (i, s) in stepped.drain(..).enumerate() {
             let report = s?;
             rewards[i] = report.map_or(0.0, |r| r.reward);
+            off_track[i] = report.map_or(0.0, |r| r.off_track);
             ended[i] = report.is_some_and(|r| r.ended);
             live[i] &= !ended[i];
         }
-        driver.after_step(&before, &mut rewards, &ended);
+        driver.after_step(&before, &mut rewards, &off_track, &ended);
     }
     Ok(runs)
 }
@@ -142,6 +145,8 @@ type Lane<'a> = ((&'a mut Box<dyn Env>, &'a mut Episode), (&'a mut [f64], &'a [f
 #[derive(Clone, Copy)]
 struct StepReport {
     reward: f64,
+    /// Distance from the segment driven in this step, measured after it.
+    off_track: f64,
     ended: bool,
 }
 
@@ -161,6 +166,7 @@ fn step_run(
     run.trajectory.push(env.position().to_vec());
     run.headings.push(env.heading());
     run.control_return += step.reward;
+    let off_track = run.dispatcher.off_track(env.position());
     let ended = match run.dispatcher.after_step(&step, env.position()) {
         Dispatch::Continue if follow == Follow::Waypoints => false,
         Dispatch::Continue | Dispatch::NewGoal(_) => {
@@ -171,7 +177,7 @@ fn step_run(
         }
         Dispatch::Done(_) => true,
     };
-    Ok(Some(StepReport { reward: step.reward, ended }))
+    Ok(Some(StepReport { reward: step.reward, off_track, ended }))
 }
 
 #[cfg(test)]
@@ -179,11 +185,13 @@ mod tests {
     use super::*;
     use crate::run::execute::start_run;
 
-    /// Steers by a fixed function of the observation and records the rewards it sees,
-    /// so two loops that stepped alike leave the same record.
+    /// Steers by a fixed function of the observation and records the rewards and
+    /// off-track distances it sees (one row of all runs per step), so two loops that
+    /// stepped alike leave the same record.
     #[derive(Default)]
     struct Recorder {
         rewards: Vec<f64>,
+        off_track: Vec<Vec<f64>>,
     }
 
     impl Driver for Recorder {
@@ -196,22 +204,25 @@ mod tests {
             }
         }
 
-        fn after_step(&mut self, _live: &[bool], rewards: &mut [f64], _ended: &[bool]) {
+        fn after_step(&mut self, _live: &[bool], rewards: &mut [f64], off_track: &[f64], _ended: &[bool]) {
             self.rewards.extend_from_slice(rewards);
+            self.off_track.push(off_track.to_vec());
         }
     }
 
-    fn runs(parallel: bool) -> (Vec<Episode>, Vec<f64>) {
+    /// Six Point runs through three random goals each, with their paths (start first).
+    fn runs_with_paths(parallel: bool) -> (Vec<Episode>, Recorder, Vec<Vec<Vec<f64>>>) {
         let robot = sim::Robot::Point;
         let mut envs: Vec<Box<dyn Env>> =
             (0..6).map(|_| sim::make_env(robot, robot.default_map()).unwrap()).collect();
         let od = envs[0].observation_space().dim();
         let mut raw = vec![0.0; envs.len() * od];
-        let mut dispatchers = vec![];
+        let (mut dispatchers, mut paths) = (vec![], vec![]);
         for (i, env) in envs.iter_mut().enumerate() {
             env.reset(i as u64, None).unwrap();
             let mut path = vec![env.position().to_vec()];
             path.extend((0..3).map(|_| env.sample_goal()));
+            paths.push(path.clone());
             // Runs of different lengths: some end while others go on.
             let limit = 50 + 40 * i;
             dispatchers.push(
@@ -229,7 +240,37 @@ mod tests {
         let mut rec = Recorder::default();
         let episodes =
             drive_threaded(&mut envs, dispatchers, Follow::Waypoints, &mut raw, &mut rec, parallel).unwrap();
+        (episodes, rec, paths)
+    }
+
+    fn runs(parallel: bool) -> (Vec<Episode>, Vec<f64>) {
+        let (episodes, rec, _) = runs_with_paths(parallel);
         (episodes, rec.rewards)
+    }
+
+    /// The off-track penalty is only right if each step is measured against the
+    /// segment it drove, not the next one (the step that reaches a waypoint ends on
+    /// its own segment) and not the robot's own chord.
+    #[test]
+    fn off_track_is_the_distance_from_the_planned_segment_being_driven() {
+        let (episodes, rec, paths) = runs_with_paths(false);
+        let mut largest: f64 = 0.0;
+        for (i, (run, path)) in episodes.iter().zip(&paths).enumerate() {
+            let reached_at = run.dispatcher.reached_at();
+            for (t, row) in rec.off_track.iter().enumerate() {
+                let step = t + 1;
+                if step >= run.trajectory.len() {
+                    assert_eq!(row[i], 0.0, "run {i} is over at step {step}");
+                    continue;
+                }
+                let k = reached_at.iter().filter(|&&s| s < step).count();
+                let want =
+                    sim::segment::point_segment_distance(&run.trajectory[step], &path[k], &path[k + 1]);
+                assert!((row[i] - want).abs() < 1e-12, "run {i} step {step}: {} against {want}", row[i]);
+                largest = largest.max(want);
+            }
+        }
+        assert!(largest > 0.05, "the runs should stray from their segments ({largest} m at most)");
     }
 
     #[test]

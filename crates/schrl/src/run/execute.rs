@@ -66,15 +66,29 @@ impl WaypointDispatcher {
         self.waypoints.get(self.next).map(|w| w.as_slice())
     }
 
-    /// The goal `follow` gives a robot at `position` on the current segment (from the
-    /// planned waypoint before the current one, or the start); `None` once done.
-    pub fn target(&self, follow: Follow, position: &[f64]) -> Option<Vec<f64>> {
+    /// The planned segment being driven: from the waypoint before the current one (or
+    /// the start) to the current one; `None` once done.
+    pub fn segment(&self) -> Option<(&[f64], &[f64])> {
         let to = self.current()?;
         let from = match self.next {
             0 => &self.reached[0],
             k => &self.waypoints[k - 1],
         };
+        Some((from, to))
+    }
+
+    /// The goal `follow` gives a robot at `position` on the current
+    /// [`WaypointDispatcher::segment`]; `None` once done.
+    pub fn target(&self, follow: Follow, position: &[f64]) -> Option<Vec<f64>> {
+        let (from, to) = self.segment()?;
         Some(follow.target(from, to, position))
+    }
+
+    /// Distance (m) from `position` to the current [`WaypointDispatcher::segment`]
+    /// (0 once done). Call it before [`WaypointDispatcher::after_step`] to measure
+    /// against the segment the step was driving.
+    pub fn off_track(&self, position: &[f64]) -> f64 {
+        self.segment().map_or(0.0, |(from, to)| sim::segment::point_segment_distance(position, from, to))
     }
 
     /// Accounts for one environment step that left the robot at `position`.

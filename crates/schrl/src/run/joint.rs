@@ -129,9 +129,28 @@ pub struct JointConfig {
     /// existed) or a point ahead on the planned segment.
     #[serde(default)]
     pub follow: Follow,
+    /// Subtracted, times the robot's distance (m) from the planned segment it drives
+    /// (from the waypoint before to the current one), from the reward of every step the
+    /// joint phase's controller learns from; the runs' own returns and `r_l` stay the
+    /// environment's. 0 (the default, the paper's reward, and runs saved before it
+    /// existed): a controller that swings wide of a turn pays only when it collides.
+    /// The planner checks clearance along those segments (README, *Following the
+    /// planned segments*).
+    #[serde(default)]
+    pub off_track_weight: f64,
 }
 
 impl JointConfig {
+    /// Errors unless [`JointConfig::off_track_weight`] is a finite number ≥ 0.
+    fn check_off_track_weight(&self) -> Result<(), String> {
+        let w = self.off_track_weight;
+        if w >= 0.0 && w.is_finite() {
+            Ok(())
+        } else {
+            Err(format!("must be a finite number ≥ 0 (reward per metre off the segment per step), got {w}"))
+        }
+    }
+
     /// The task the planner plans for: `task` with the goal margin, the obstacle
     /// model and, if `with_safe_margin`, the safe margin. Errors when the neural
     /// obstacle learned another map.
@@ -165,6 +184,7 @@ impl Default for JointConfig {
             safe_margin: 0.0,
             neural_obstacle: None,
             follow: Follow::Waypoints,
+            off_track_weight: 0.0,
         }
     }
 }
@@ -344,6 +364,7 @@ impl JointRunSettings {
                 return Err(bad(name, format!("must be a non-negative number of metres, got {metres}")));
             }
         }
+        j.check_off_track_weight().map_err(|m| bad("off_track_weight", m))?;
         if let Some(net) = &j.neural_obstacle {
             net.check().map_err(|m| bad("neural_obstacle", m))?;
         }
@@ -418,12 +439,15 @@ pub struct JointTrainer {
 }
 
 /// The controller acting while it learns: actions sampled from the policy, each live
-/// run's transitions recorded for PPO, rewards scaled as in controller training. With
-/// `learn` off it acts with the policy's mean and records nothing.
+/// run's transitions recorded for PPO, rewards less the off-track penalty and scaled as
+/// in controller training. With `learn` off it acts with the policy's mean and records
+/// nothing.
 struct Learner<'a> {
     control: &'a mut ControlTrainer,
     scaler: &'a mut RewardScaler,
     learn: bool,
+    /// [`JointConfig::off_track_weight`].
+    off_track_weight: f64,
     cache: PolicyCache,
     x: Vec<f32>,
     actions: Vec<f32>,
@@ -478,9 +502,14 @@ impl Driver for Learner<'_> {
         actions.iter_mut().zip(&self.actions).for_each(|(d, s)| *d = *s as f64);
     }
 
-    fn after_step(&mut self, live: &[bool], rewards: &mut [f64], ended: &[bool]) {
+    fn after_step(&mut self, live: &[bool], rewards: &mut [f64], off_track: &[f64], ended: &[bool]) {
         if !self.learn {
             return;
+        }
+        if self.off_track_weight > 0.0 {
+            for (r, d) in rewards.iter_mut().zip(off_track) {
+                *r -= self.off_track_weight * d;
+            }
         }
         let (od, ad) = (self.control.policy.obs_dim(), self.control.policy.act_dim());
         for (i, run) in self.runs.iter_mut().enumerate().filter(|(i, _)| live[*i]) {
@@ -580,6 +609,9 @@ impl JointTrainer {
                 });
             }
         }
+        config
+            .check_off_track_weight()
+            .map_err(|message| RunError::Setting { key: "off_track_weight", message })?;
         let task = Task { follow: config.follow, ..task };
         let mut control = control;
         if config.control_target_kl.is_some() {
@@ -701,6 +733,7 @@ impl JointTrainer {
             control: &mut self.control,
             scaler: &mut self.scaler,
             learn,
+            off_track_weight: self.config.off_track_weight,
             cache: PolicyCache::default(),
             x: Vec::new(),
             actions: Vec::new(),
