@@ -324,21 +324,24 @@ fn joint_train_resume_and_eval_end_to_end() {
         dir.join("x").to_str().unwrap(),
     ]);
     assert!(stderr(&o).contains("a point controller, not car"), "{}", stderr(&o));
-    let o = schrl(&[
-        "train",
-        "--task",
-        "seq",
-        "--safe-margin=-0.5",
-        "--controller",
-        ctl.to_str().unwrap(),
-        "--out",
-        dir.join("y").to_str().unwrap(),
-    ]);
-    assert!(
-        !o.status.success() && stderr(&o).contains("--safe-margin must be a non-negative"),
-        "{}",
-        stderr(&o)
-    );
+    for (flag, message) in [
+        ("--safe-margin=-0.5", "--safe-margin must be a non-negative"),
+        ("--turn-margin=nan", "--turn-margin must be a non-negative number of metres"),
+    ] {
+        let out = dir.join("refused");
+        let o = schrl(&[
+            "train",
+            "--task",
+            "seq",
+            flag,
+            "--controller",
+            ctl.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(!o.status.success() && stderr(&o).contains(message), "{flag}: {}", stderr(&o));
+        assert!(!out.exists(), "{flag}: a refused run leaves no directory");
+    }
 }
 
 /// Copies a run directory (files and one level of subdirectories).

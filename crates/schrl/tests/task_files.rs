@@ -237,16 +237,21 @@ fn a_goal_margin_shrinks_each_goal_by_at_most_a_third_and_keeps_the_rest() {
     assert!(shrunk.spec().robustness(&flat, &hard).unwrap() < 0.0);
 }
 
-#[test]
-fn a_safe_margin_widens_the_clearance_planned_and_keeps_the_goals() {
-    let t = Task::point(TaskKind::Loop);
-    // Back and forth along x = 2.4 between the right-hand corners: 0.35 m from the
-    // end of the right wall (x = 2.75), which the robot's 0.1 m radius clears.
+/// Point Loop's plan back and forth along x = 2.4 between the right-hand corners
+/// (flat): its segments pass 0.35 m from the end of the right wall (x = 2.75), which
+/// the robot's 0.1 m radius clears.
+fn right_hand_bounce(t: &Task) -> Vec<f64> {
     let mut path = vec![vec![1.5, -1.5]];
     for k in 0..t.steps {
         path.push(if k % 2 == 0 { vec![2.4, 1.6] } else { vec![2.4, -1.6] });
     }
-    let flat: Vec<f64> = path.into_iter().flatten().collect();
+    path.into_iter().flatten().collect()
+}
+
+#[test]
+fn a_safe_margin_widens_the_clearance_planned_and_keeps_the_goals() {
+    let t = Task::point(TaskKind::Loop);
+    let flat = right_hand_bounce(&t);
     let hard = stl::Semantics::hard();
     let rho = |task: &Task| task.spec().robustness(&flat, &hard).unwrap();
     assert!(rho(&t) > 0.0);
@@ -258,6 +263,28 @@ fn a_safe_margin_widens_the_clearance_planned_and_keeps_the_goals() {
         (t.with_safe_margin(-1.0).safe_radius - t.safe_radius).abs() < 1e-12,
         "a negative margin is none"
     );
+}
+
+#[test]
+fn a_turn_margin_asks_clearance_at_the_turns_not_along_the_segments() {
+    let t = Task::point(TaskKind::Loop);
+    // Turns at (2.4, ±1.6), 1.35 m below and above the wall beside the door.
+    let flat = right_hand_bounce(&t);
+    let hard = stl::Semantics::hard();
+    let rho = |task: &Task| task.spec().robustness(&flat, &hard).unwrap();
+    assert_eq!(rho(&t.with_turn_margin(1.0)), rho(&t), "the segments still bind");
+    assert!(rho(&t.with_turn_margin(1.3)) < 0.0, "1.35 − 0.1 m at the turns is short of 1.3 m");
+    // The turn margin counts beyond the safe margin: 1.35 − 0.3 m at the turns.
+    let wider = t.with_safe_margin(0.2);
+    assert_eq!(rho(&wider.with_turn_margin(1.0)), rho(&wider), "1.0 m more at the turns is met");
+    assert!(rho(&wider.with_turn_margin(1.1)) < 0.0, "1.1 m more is not");
+    // The batched, differentiable spec the planner trains on reads the same margin.
+    let as_f32: Vec<f32> = flat.iter().map(|x| *x as f32).collect();
+    let paths =
+        candle_core::Tensor::from_vec(as_f32, (1, t.steps + 1, 2), &candle_core::Device::Cpu).unwrap();
+    let batched: Vec<f32> =
+        t.with_turn_margin(1.3).tensor_spec().robustness(&paths, &hard).unwrap().to_vec1().unwrap();
+    assert!((batched[0] as f64 - rho(&t.with_turn_margin(1.3))).abs() < 1e-5, "{batched:?}");
 }
 
 /// Regression: the Drone counts a waypoint reached within 0.6 m and its goals are

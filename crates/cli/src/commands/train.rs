@@ -143,6 +143,11 @@ pub struct TrainArgs {
     /// `safe_radius`) and from regions to avoid [default: 0.1].
     #[arg(long)]
     safe_margin: Option<f64>,
+    /// Metres more clearance the planner keeps at each waypoint the robot turns at
+    /// than along its segments (room for a robot that swings out of its turns)
+    /// [default: 0].
+    #[arg(long)]
+    turn_margin: Option<f64>,
     /// What the planner's `safe` measures obstacles with: exact (the map's distance)
     /// or neural (a network fitted to it, as the paper's Drone planner saw the duck;
     /// fitted with `schrl sdf fit`'s defaults and the run's seed unless
@@ -198,6 +203,7 @@ impl TrainArgs {
         set(&mut j.plan_batch, self.plan_batch);
         set(&mut j.goal_margin, self.goal_margin);
         set(&mut j.safe_margin, self.safe_margin);
+        set(&mut j.turn_margin, self.turn_margin);
         set(&mut j.runs_per_start, self.runs_per_start);
         set(&mut j.control_weight, self.control_weight);
         set(&mut j.control_lr, self.control_lr.map(Some));
@@ -317,6 +323,7 @@ impl TrainArgs {
                 ("--freeze-controller", self.freeze_controller && !saved.joint.freeze_controller),
                 ("--goal-margin", differs(&self.goal_margin, &saved.joint.goal_margin)),
                 ("--safe-margin", differs(&self.safe_margin, &saved.joint.safe_margin)),
+                ("--turn-margin", differs(&self.turn_margin, &saved.joint.turn_margin)),
                 (
                     "--obstacle",
                     self.obstacle.is_some_and(|o| {

@@ -221,15 +221,21 @@ pub fn pretrain(
         return Ok(None);
     }
     let sat_of = |c: &Option<Candidate>| c.as_ref().map_or(0.0, |c| c.satisfaction);
-    let widened = t.plan.task().clone();
+    // The turn margin is the joint phase's (here and in the fallbacks below): the
+    // search does not find plans with it (Doggo Seq seed 0, 0.5 m: none of 30
+    // candidates), the constrained updates move a found plan's turns out.
+    let widened = t.plan.task().with_turn_margin(0.0);
     let base = *t.plan.config();
     let mut scores = vec![];
     let mut best = best_candidate(&base, &widened, cfg, progress, &mut |c| scores.push(c))?;
     let mut dropped = false;
     let retried = sat_of(&best) < SATISFYING && t.config.safe_margin > 0.0;
     if retried {
-        let own =
-            t.config.planned_task(&t.task, false).map_err(|e| candle_core::Error::Msg(e.to_string()))?;
+        let own = t
+            .config
+            .planned_task(&t.task, false)
+            .map_err(|e| candle_core::Error::Msg(e.to_string()))?
+            .with_turn_margin(0.0);
         let fallback = best_candidate(&base, &own, cfg, progress, &mut |c| {
             scores.push(CandidateScore { with_safe_margin: false, ..c })
         })?;
@@ -243,8 +249,11 @@ pub fn pretrain(
     if cfg.guide && sat_of(&best) < FOUND {
         // On the task the last candidates planned for: the safe margin was dropped
         // for it, or there is none.
-        let own =
-            t.config.planned_task(&t.task, false).map_err(|e| candle_core::Error::Msg(e.to_string()))?;
+        let own = t
+            .config
+            .planned_task(&t.task, false)
+            .map_err(|e| candle_core::Error::Msg(e.to_string()))?
+            .with_turn_margin(0.0);
         let done = scores.len() * cfg.updates;
         let candidate = scores.len() + 1;
         let g = guided_candidate(&base, &own, cfg, &GUIDE, &mut |i, satisfaction| {
@@ -268,6 +277,11 @@ pub fn pretrain(
     let mut plan = c.trainer;
     plan.set_control_reward(Box::new(PathLengthReward { weight: t.config.length_weight }));
     t.plan = plan;
+    if t.config.turn_margin > 0.0 {
+        let joint =
+            t.config.planned_task(&t.task, true).map_err(|e| candle_core::Error::Msg(e.to_string()))?;
+        t.plan.set_task(joint)?;
+    }
     // The kept planner is the warm start the joint phase's trust region holds to.
     let anchor = if t.config.freeze_planner { 0.0 } else { t.config.anchor_weight };
     t.plan.anchor_here(anchor, t.config.anchor_on)?;

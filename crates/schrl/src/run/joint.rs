@@ -118,6 +118,13 @@ pub struct JointConfig {
     /// used 0.
     #[serde(default)]
     pub safe_margin: f64,
+    /// Metres more clearance the planner asks at each waypoint the robot turns at
+    /// than along its segments ([`Task::with_turn_margin`]), room for a robot that
+    /// swings out of its turns. The joint phase's: pre-training searches without it
+    /// and the constrained updates move the kept plan's turns out. 0 (the default,
+    /// and runs saved before it existed): none.
+    #[serde(default)]
+    pub turn_margin: f64,
     /// The planner's `safe` measures obstacles with this network instead of the
     /// map's exact distance (`None`, the default; see [`JointConfig::planned_task`]).
     /// The paper's Drone planner saw a neural SDF of the duck (§3.1). Runs are judged
@@ -152,11 +159,14 @@ impl JointConfig {
     }
 
     /// The task the planner plans for: `task` with the goal margin, the obstacle
-    /// model and, if `with_safe_margin`, the safe margin. Errors when the neural
+    /// model, the turn margin and, if `with_safe_margin`, the safe margin. Errors when the neural
     /// obstacle learned another map.
     pub fn planned_task(&self, task: &Task, with_safe_margin: bool) -> Result<Task, RunError> {
         let margin = if with_safe_margin { self.safe_margin } else { 0.0 };
-        let planned = task.with_goal_margin(self.goal_margin).with_safe_margin(margin);
+        let planned = task
+            .with_goal_margin(self.goal_margin)
+            .with_safe_margin(margin)
+            .with_turn_margin(self.turn_margin);
         match &self.neural_obstacle {
             None => Ok(planned),
             Some(net) => planned
@@ -182,6 +192,7 @@ impl Default for JointConfig {
             freeze_controller: false,
             goal_margin: 0.0,
             safe_margin: 0.0,
+            turn_margin: 0.0,
             neural_obstacle: None,
             follow: Follow::Waypoints,
             off_track_weight: 0.0,
@@ -358,6 +369,7 @@ impl JointRunSettings {
         for (name, metres) in [
             ("goal_margin", j.goal_margin),
             ("safe_margin", j.safe_margin),
+            ("turn_margin", j.turn_margin),
             ("plan_step_limit", j.plan_step_limit),
         ] {
             if !(metres >= 0.0 && metres.is_finite()) {

@@ -18,6 +18,7 @@
 pub mod along;
 mod follow;
 pub mod neural_sdf;
+pub mod turn;
 
 pub use follow::Follow;
 
@@ -153,6 +154,9 @@ pub struct Task {
     /// Metres by which the planner's spec grows the regions to avoid (0 as loaded;
     /// see [`Task::with_safe_margin`]).
     pub avoid_margin: f64,
+    /// Metres more clearance the planner's `safe` asks at the waypoints a robot turns
+    /// at (0 as loaded; see [`Task::with_turn_margin`] and [`turn`]).
+    pub turn_margin: f64,
     /// Waypoint index from which the Signal task's counter holds.
     pub counter_from: Option<usize>,
     /// Steps to reach count environment steps until this many waypoints were reached
@@ -510,6 +514,7 @@ impl Task {
             safe_radius: t.safe_radius,
             safe_along: t.safe_along,
             avoid_margin: 0.0,
+            turn_margin: 0.0,
             counter_from: t.counter_from,
             steps_to_reach_at: t.steps_to_reach_at,
             toml: toml_text.to_string(),
@@ -597,6 +602,14 @@ impl Task {
         Task { safe_radius: self.safe_radius + m, avoid_margin: self.avoid_margin + m, ..self.clone() }
     }
 
+    /// The task with `safe` asking `margin` more clearance at every waypoint the robot
+    /// turns at than along the segments ([`turn`]): room for a robot that sweeps
+    /// outside its plan's corners. The planner's view; judge runs with the task as
+    /// loaded.
+    pub fn with_turn_margin(&self, margin: f64) -> Task {
+        Task { turn_margin: margin.max(0.0), ..self.clone() }
+    }
+
     /// The task with `safe` measured by `obstacle` (the planner's view; judge runs
     /// with the task as loaded). A network must have learned this task's map.
     pub fn with_obstacle(&self, obstacle: ObstacleModel) -> Result<Task, String> {
@@ -662,6 +675,8 @@ impl Task {
             }
             ObstacleModel::Neural(net) => Arc::new(net.clearance(self.safe_radius).along(self.safe_along)),
         };
+        let safe: Arc<dyn Predicate> =
+            if self.turn_margin > 0.0 { Arc::new(turn::TurnRoom::new(safe, self.turn_margin)) } else { safe };
         out.push(("safe".into(), safe));
         if let Some(step) = self.counter_from {
             out.push(("counter".into(), Arc::new(AfterStep { step, truth: COUNTER_TRUTH })));
