@@ -231,11 +231,7 @@ pub fn pretrain(
     let mut dropped = false;
     let retried = sat_of(&best) < SATISFYING && t.config.safe_margin > 0.0;
     if retried {
-        let own = t
-            .config
-            .planned_task(&t.task, false)
-            .map_err(|e| candle_core::Error::Msg(e.to_string()))?
-            .with_turn_margin(0.0);
+        let own = planned(t, false)?.with_turn_margin(0.0);
         let fallback = best_candidate(&base, &own, cfg, progress, &mut |c| {
             scores.push(CandidateScore { with_safe_margin: false, ..c })
         })?;
@@ -249,11 +245,7 @@ pub fn pretrain(
     if cfg.guide && sat_of(&best) < FOUND {
         // On the task the last candidates planned for: the safe margin was dropped
         // for it, or there is none.
-        let own = t
-            .config
-            .planned_task(&t.task, false)
-            .map_err(|e| candle_core::Error::Msg(e.to_string()))?
-            .with_turn_margin(0.0);
+        let own = planned(t, false)?.with_turn_margin(0.0);
         let done = scores.len() * cfg.updates;
         let candidate = scores.len() + 1;
         let g = guided_candidate(&base, &own, cfg, &GUIDE, &mut |i, satisfaction| {
@@ -278,8 +270,7 @@ pub fn pretrain(
     plan.set_control_reward(Box::new(PathLengthReward { weight: t.config.length_weight }));
     t.plan = plan;
     if t.config.turn_margin > 0.0 {
-        let joint =
-            t.config.planned_task(&t.task, true).map_err(|e| candle_core::Error::Msg(e.to_string()))?;
+        let joint = planned(t, true)?;
         t.plan.set_task(joint)?;
     }
     // The kept planner is the warm start the joint phase's trust region holds to.
@@ -304,6 +295,11 @@ struct Candidate {
 
 /// The candidates of [`pretrain`] for `task`, and the one kept; `scored` hears each
 /// candidate's validation.
+/// The task `t`'s planner plans for ([`crate::run::joint::JointConfig::planned_task`]).
+fn planned(t: &JointTrainer, with_safe_margin: bool) -> candle_core::Result<Task> {
+    t.config.planned_task(&t.task, with_safe_margin).map_err(|e| candle_core::Error::Msg(e.to_string()))
+}
+
 fn best_candidate(
     base: &CpgConfig,
     task: &Task,
