@@ -160,11 +160,13 @@ fn save_run(dir: &std::path::Path, t: &ControlTrainer) {
 fn resuming_from_a_checkpoint_continues_exactly() {
     let scratch = tempfile::tempdir().unwrap();
     let dir = scratch.path().join("control-resume");
-    // Near goals too: their draws come from the checkpointed random streams; and the
-    // off-track penalty, measured from where each environment's goal was set.
+    // Near goals too: their draws come from the checkpointed random streams; the
+    // off-track penalty, measured from where each environment's goal was set; and the
+    // track in the observation, whose length the checkpoint must agree with.
     let cfg = ControlConfig {
         near_goals: Some(NearGoals { fraction: 0.5, within: 1.0 }),
         off_track_weight: 0.2,
+        observe_track: true,
         ..tiny_config(Robot::Car, 8, 8000)
     };
     let mut straight = ControlTrainer::new(cfg.clone()).unwrap();
@@ -177,6 +179,10 @@ fn resuming_from_a_checkpoint_continues_exactly() {
     assert_eq!(numbers(&resumed.train_update().unwrap()), second);
     assert_eq!(resumed.policy.params, straight.policy.params);
     assert_ne!(first, second);
+    assert_eq!(resumed.policy.obs_dim(), 26 + 2, "the Car's observation and its track offset");
+    let deployed = resumed.controller();
+    assert!(deployed.observe_track);
+    evaluate(&deployed, &open_map(Robot::Car), 4, 1, 50, GoalDraw::Anywhere).unwrap();
 
     // Starting another run there without permission to replace it is refused.
     let err = RunWriter::create(&dir, RunKind::Controller, &cfg, Existing::Refuse).err().unwrap();

@@ -300,7 +300,7 @@ fn a_waypoint_counts_as_reached_within_two_thirds_of_the_smallest_goal() {
     }
     // The executing environment uses it: reached at 0.35 m under the Drone's own
     // radius, not under the task's.
-    let mut env = schrl::run::execute::task_env(sim::Robot::Drone, &drone).unwrap();
+    let mut env = schrl::run::execute::task_env(sim::Robot::Drone, &drone, false).unwrap();
     assert!((env.reach_radius() - 1.0 / 3.0).abs() < 1e-12);
     env.reset(0, Some(&[2.0, 2.0, 1.0])).unwrap();
     env.set_goal(&[2.35, 2.0, 1.0]).unwrap();
@@ -320,7 +320,7 @@ fn a_waypoint_counts_as_reached_within_two_thirds_of_the_smallest_goal() {
 fn drone_loop_timed_out_with_the_references_4000_steps() {
     use schrl::run::execute::{Dispatch, Outcome, start_run, task_env};
     let t = Task::builtin("drone", TaskKind::Loop).unwrap();
-    let mut env = task_env(sim::Robot::Drone, &t).unwrap();
+    let mut env = task_env(sim::Robot::Drone, &t, false).unwrap();
     let bounce = [vec![1.0, 1.0, 2.0], vec![2.0, 1.0, 1.0]];
     let start = vec![t.start.1[0], t.start.0[1], t.start.0[2]];
     let path: Vec<Vec<f64>> =

@@ -214,9 +214,22 @@ pub trait Env: Send {
     fn set_goal(&mut self, goal: &[f64]) -> Result<(), EnvError>;
     /// The current goal.
     fn goal(&self) -> &[f64];
-    /// Where the robot was when the current goal was set (its start after a reset):
-    /// with [`Env::goal`], the straight segment a robot that heads for its goal drives.
+    /// Where the robot was when the current goal was set (its start after a reset),
+    /// unless [`Env::set_goal_origin`] moved it: with [`Env::goal`], the straight
+    /// segment a robot that heads for its goal drives (its *track*).
     fn goal_origin(&self) -> &[f64];
+    /// Sets the start of the current track (a planned segment's first waypoint, where
+    /// a robot that reached it within its reach radius stands off it).
+    fn set_goal_origin(&mut self, origin: &[f64]) -> Result<(), EnvError>;
+    /// With `on`, every observation ends with the robot's offset from its track (the
+    /// point of the segment [`Env::goal_origin`] → [`Env::goal`] nearest the robot,
+    /// less the robot's position, turned into the robot's heading frame: forward,
+    /// left, and up for a flying robot), so a controller can see how far off its
+    /// segment it drives; the observation space grows by the plan dimension. Off by
+    /// default: the robots' own observations, as the paper's.
+    fn set_track_observation(&mut self, on: bool);
+    /// Whether observations end with the track offset ([`Env::set_track_observation`]).
+    fn track_observation(&self) -> bool;
     /// The robot's position in plan space.
     fn position(&self) -> &[f64];
     /// The robot's heading: yaw about the vertical axis (rad).
@@ -310,6 +323,7 @@ pub struct GoalEnv<D: Dynamics> {
     steps: usize,
     max_steps: usize,
     rng: ChaCha8Rng,
+    track_observation: bool,
     obs_space: BoxSpace,
     act_space: BoxSpace,
 }
@@ -336,6 +350,7 @@ impl<D: Dynamics> GoalEnv<D> {
             steps: 0,
             max_steps: DEFAULT_MAX_STEPS,
             rng: ChaCha8Rng::seed_from_u64(0),
+            track_observation: false,
             obs_space: D::observation_space(),
             act_space: D::action_space(),
         };
@@ -379,11 +394,28 @@ impl<D: Dynamics> GoalEnv<D> {
         euclidean(self.robot.plan_position(), &self.goal)
     }
 
-    fn check_obs(obs: &[f64]) -> Result<(), EnvError> {
-        if obs.len() != D::OBS_DIM {
-            return Err(EnvError::ObservationLength { expected: D::OBS_DIM, got: obs.len() });
+    fn check_obs(&self, obs: &[f64]) -> Result<(), EnvError> {
+        if obs.len() != self.obs_space.dim() {
+            return Err(EnvError::ObservationLength { expected: self.obs_space.dim(), got: obs.len() });
         }
         Ok(())
+    }
+
+    /// The robot's observation, then (with [`Env::set_track_observation`]) its offset
+    /// from the track.
+    fn write_observation(&self, obs: &mut [f64]) {
+        let (own, track) = obs.split_at_mut(D::OBS_DIM);
+        self.robot.observe(&self.goal, own);
+        if self.track_observation {
+            let p = self.robot.plan_position();
+            let (a, b) = (&self.goal_origin, &self.goal);
+            let s = crate::segment::closest_fraction(p, a, b);
+            let d: Vec<f64> = (0..D::PLAN_DIM).map(|k| a[k] + s * (b[k] - a[k]) - p[k]).collect();
+            let (sin, cos) = self.robot.yaw().sin_cos();
+            track[0] = cos * d[0] + sin * d[1];
+            track[1] = -sin * d[0] + cos * d[1];
+            track[2..].copy_from_slice(&d[2..]);
+        }
     }
 }
 
@@ -421,7 +453,7 @@ impl<D: Dynamics> Env for GoalEnv<D> {
     }
 
     fn reset_into(&mut self, seed: u64, start: Option<&[f64]>, obs: &mut [f64]) -> Result<(), EnvError> {
-        Self::check_obs(obs)?;
+        self.check_obs(obs)?;
         if let Some(s) = start {
             Self::check_point("start", s)?;
             if self.map.sdf(s) <= D::RADIUS {
@@ -443,7 +475,7 @@ impl<D: Dynamics> Env for GoalEnv<D> {
         self.goal_reached = false;
         self.prev_dist = self.distance();
         self.steps = 0;
-        self.robot.observe(&self.goal, obs);
+        self.write_observation(obs);
         Ok(())
     }
 
@@ -454,7 +486,7 @@ impl<D: Dynamics> Env for GoalEnv<D> {
         if let Some((index, &value)) = action.iter().enumerate().find(|(_, v)| !v.is_finite()) {
             return Err(EnvError::NonFiniteAction { robot: D::NAME, index, value });
         }
-        Self::check_obs(obs)?;
+        self.check_obs(obs)?;
         let mut a = [0.0; 32];
         let a = &mut a[..D::ACT_DIM];
         for (i, (o, v)) in a.iter_mut().zip(action).enumerate() {
@@ -470,7 +502,7 @@ impl<D: Dynamics> Env for GoalEnv<D> {
             self.goal_reached = true;
             reward += REACH_BONUS;
         }
-        self.robot.observe(&self.goal, obs);
+        self.write_observation(obs);
         let fell = self.robot.fallen();
         Ok(Step { reward, reached, collided, truncated: self.steps >= self.max_steps, fell })
     }
@@ -492,6 +524,26 @@ impl<D: Dynamics> Env for GoalEnv<D> {
         &self.goal_origin
     }
 
+    fn set_goal_origin(&mut self, origin: &[f64]) -> Result<(), EnvError> {
+        Self::check_point("goal origin", origin)?;
+        self.goal_origin.copy_from_slice(origin);
+        Ok(())
+    }
+
+    fn set_track_observation(&mut self, on: bool) {
+        self.track_observation = on;
+        let mut space = D::observation_space();
+        if on {
+            space.low.extend(std::iter::repeat_n(f64::NEG_INFINITY, D::PLAN_DIM));
+            space.high.extend(std::iter::repeat_n(f64::INFINITY, D::PLAN_DIM));
+        }
+        self.obs_space = space;
+    }
+
+    fn track_observation(&self) -> bool {
+        self.track_observation
+    }
+
     fn position(&self) -> &[f64] {
         self.robot.plan_position()
     }
@@ -505,7 +557,7 @@ impl<D: Dynamics> Env for GoalEnv<D> {
     }
 
     fn observe(&self, obs: &mut [f64]) {
-        self.robot.observe(&self.goal, obs);
+        self.write_observation(obs);
     }
 
     fn steps(&self) -> usize {

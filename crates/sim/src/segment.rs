@@ -56,13 +56,20 @@ pub fn segment_box_2d(a: &[f64], b: &[f64], center: &[f64; 2], half: &[f64; 2]) 
 
 /// Distance from `p` to the segment `a → b` (any dimension).
 pub fn point_segment_distance(p: &[f64], a: &[f64], b: &[f64]) -> f64 {
+    let s = closest_fraction(p, a, b);
+    (0..p.len()).map(|k| (p[k] - a[k] - s * (b[k] - a[k])).powi(2)).sum::<f64>().sqrt()
+}
+
+/// Where on the segment `a → b` the point nearest `p` lies, as the fraction `s ∈ [0, 1]`
+/// of the way from `a` (0 for a segment of no length): the nearest point is
+/// `a + s (b − a)`.
+pub fn closest_fraction(p: &[f64], a: &[f64], b: &[f64]) -> f64 {
     let (mut ab2, mut apab) = (0.0, 0.0);
     for k in 0..p.len() {
         ab2 += (b[k] - a[k]) * (b[k] - a[k]);
         apab += (p[k] - a[k]) * (b[k] - a[k]);
     }
-    let s = if ab2 > 0.0 { (apab / ab2).clamp(0.0, 1.0) } else { 0.0 };
-    (0..p.len()).map(|k| (p[k] - a[k] - s * (b[k] - a[k])).powi(2)).sum::<f64>().sqrt()
+    if ab2 > 0.0 { (apab / ab2).clamp(0.0, 1.0) } else { 0.0 }
 }
 
 /// Distance between the segments `p1 → q1` and `p2 → q2` in 3-D.

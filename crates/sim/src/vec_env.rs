@@ -38,6 +38,16 @@ impl VecEnv {
         Ok(v)
     }
 
+    /// Ends every environment's observations with its track offset, or not
+    /// ([`Env::set_track_observation`]); [`VecEnv::obs_dim`] follows. Observe or reset
+    /// before stepping: observations written before are of the old length.
+    pub fn set_track_observation(&mut self, on: bool) {
+        for e in &mut self.envs {
+            e.set_track_observation(on);
+        }
+        self.obs_dim = self.envs.first().map_or(0, |e| e.observation_space().dim());
+    }
+
     /// Number of environments.
     pub fn len(&self) -> usize {
         self.envs.len()

@@ -280,3 +280,58 @@ fn near_goals_are_free_beyond_the_reach_radius_and_within_the_ball() {
         assert!(map.sdf(&anywhere) > env.radius(), "{robot}");
     }
 }
+
+/// The track offset is the nearest point of the segment origin → goal less the
+/// robot's position, turned into its heading frame (forward, left; up unturned), and
+/// appended after the robot's own observation, which it leaves alone.
+#[test]
+fn track_observation_is_the_offset_from_the_segment_in_the_heading_frame() {
+    for (robot, map, start, origin, goal) in [
+        (Robot::Point, "empty", vec![0.0, 0.0], vec![-1.0, 1.0], vec![3.0, 1.0]),
+        (Robot::Car, "empty", vec![0.5, -0.5], vec![2.5, -2.0], vec![2.5, 2.0]),
+        (Robot::Drone, "floor", vec![0.0, 0.0, 1.0], vec![-1.0, 0.0, 2.0], vec![1.0, 0.0, 2.0]),
+    ] {
+        let mut plain = make_env(robot, Map::by_name(map).unwrap()).unwrap();
+        let mut env = make_env(robot, Map::by_name(map).unwrap()).unwrap();
+        assert!(!env.track_observation(), "{robot}: off by default");
+        env.set_track_observation(true);
+        let own = plain.observation_space().dim();
+        assert_eq!(env.observation_space().dim(), own + env.plan_dim(), "{robot}");
+        for e in [&mut plain, &mut env] {
+            e.reset(3, Some(&start)).unwrap();
+            e.set_goal(&goal).unwrap();
+            e.set_goal_origin(&origin).unwrap();
+        }
+        // Off the segment and past its origin's end, after a few steps.
+        for _ in 0..5 {
+            let action = vec![0.3; env.action_space().dim()];
+            plain.step(&action).unwrap();
+            let (obs, _) = env.step(&action).unwrap();
+            let want = plain.reset_free_obs();
+            assert_eq!(&obs[..own], &want[..], "{robot}: the robot's own observation is unchanged");
+            let p = env.position().to_vec();
+            let s = sim::segment::closest_fraction(&p, &origin, &goal);
+            let d: Vec<f64> = (0..p.len()).map(|k| origin[k] + s * (goal[k] - origin[k]) - p[k]).collect();
+            let (sin, cos) = env.heading().sin_cos();
+            let (fwd, left) = (cos * d[0] + sin * d[1], -sin * d[0] + cos * d[1]);
+            let tail = &obs[own..];
+            assert!((tail[0] - fwd).abs() < 1e-12 && (tail[1] - left).abs() < 1e-12, "{robot}: {tail:?}");
+            assert_eq!(&tail[2..], &d[2..], "{robot}: height unturned");
+            let off = sim::segment::point_segment_distance(&p, &origin, &goal);
+            let norm = tail.iter().map(|x| x * x).sum::<f64>().sqrt();
+            assert!((norm - off).abs() < 1e-9 && off > 0.1, "{robot}: {norm} against {off}");
+        }
+        // Set goals start their track where the robot stands: no offset.
+        env.set_goal(&goal).unwrap();
+        let obs = env.reset_free_obs();
+        assert!(obs[own..].iter().all(|x| x.abs() < 1e-12), "{robot}: {:?}", &obs[own..]);
+        assert!(env.set_goal_origin(&[f64::NAN; 3][..env.plan_dim()]).is_err());
+        let mut short = vec![0.0; own];
+        assert!(matches!(
+            env.step_into(&vec![0.0; env.action_space().dim()], &mut short),
+            Err(EnvError::ObservationLength { .. })
+        ));
+        env.set_track_observation(false);
+        assert_eq!(env.observation_space().dim(), own, "{robot}: off again");
+    }
+}

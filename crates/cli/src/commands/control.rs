@@ -66,6 +66,11 @@ pub struct TrainArgs {
     /// between where its goal was set and the goal (0: the paper's reward) [default: 0].
     #[arg(long)]
     off_track_weight: Option<f64>,
+    /// The controller also observes its offset from its track (from where its goal was
+    /// set; the planned segment when it executes a plan), in its heading frame [default:
+    /// off, the robot's own observation].
+    #[arg(long)]
+    observe_track: bool,
     #[command(flatten)]
     run: super::RunDirArgs,
     /// Save a checkpoint every this many updates (and at the end).
@@ -151,6 +156,7 @@ impl TrainArgs {
         config.near_goals = self.near_goals(config.near_goals);
         config.fall_penalty = self.fall_penalty.unwrap_or(config.fall_penalty);
         config.off_track_weight = self.off_track_weight.unwrap_or(config.off_track_weight);
+        config.observe_track = self.observe_track;
         Ok(config)
     }
 
@@ -188,6 +194,7 @@ impl TrainArgs {
                 ),
                 ("--fall-penalty", differs(&self.fall_penalty, &saved.fall_penalty)),
                 ("--off-track-weight", differs(&self.off_track_weight, &saved.off_track_weight)),
+                ("--observe-track", self.observe_track && !saved.observe_track),
             ],
         )?;
         Ok(ControlConfig { total_steps: self.steps.unwrap_or(saved.total_steps), ..saved.clone() })

@@ -607,7 +607,7 @@ pub fn eval(args: EvalArgs) -> Result<()> {
     };
     let mut task = t.task.clone();
     if let Some(follow) = args.follow {
-        let reach = schrl::run::execute::task_env(task.robot, &task)?.reach_radius();
+        let reach = schrl::run::execute::task_env(task.robot, &task, false)?.reach_radius();
         follow.check(reach).map_err(|e| anyhow::anyhow!("--follow {follow}: {e}"))?;
         task.follow = follow;
     }

@@ -174,7 +174,7 @@ impl CrmTrainer {
             return Err(RunError::Setting { key: "save_every", message: "must be at least 1".into() });
         }
         let mut rng = ChaCha8Rng::seed_from_u64(settings.seed);
-        let mut env = task_env(task.robot, &task)?;
+        let mut env = task_env(task.robot, &task, false)?;
         let od = flat_obs_dim(env.observation_space().dim(), task.map.dim());
         let ad = env.action_space().dim();
         let hierarchy = match &settings.dhrm {

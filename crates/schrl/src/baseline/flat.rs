@@ -175,7 +175,8 @@ pub fn evaluate(
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut eval = TaskEval::empty();
     for _ in 0..groups {
-        let mut envs = (0..per_group).map(|_| task_env(task.robot, task)).collect::<Result<Vec<_>, _>>()?;
+        let mut envs =
+            (0..per_group).map(|_| task_env(task.robot, task, false)).collect::<Result<Vec<_>, _>>()?;
         let od = flat_obs_dim(envs[0].observation_space().dim(), task.map.dim());
         let ad = envs[0].action_space().dim();
         driver.begin(per_group);

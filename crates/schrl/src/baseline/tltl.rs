@@ -129,7 +129,7 @@ impl TltlTrainer {
         }
         let mut rng = ChaCha8Rng::seed_from_u64(settings.seed);
         let n = settings.ppo.num_envs;
-        let mut envs = (0..n).map(|_| task_env(task.robot, &task)).collect::<Result<Vec<_>, _>>()?;
+        let mut envs = (0..n).map(|_| task_env(task.robot, &task, false)).collect::<Result<Vec<_>, _>>()?;
         let od = flat_obs_dim(envs[0].observation_space().dim(), task.map.dim());
         let ad = envs[0].action_space().dim();
         let policy = ActorCritic::new(od, ad, &settings.ppo.hidden, &mut rng);
@@ -176,6 +176,7 @@ impl TltlTrainer {
             policy: self.policy.clone(),
             obs_rms: self.obs_rms.clone(),
             normalize_obs: self.settings.ppo.norm_obs,
+            observe_track: false,
         }
     }
 

@@ -62,6 +62,14 @@ pub struct ControlConfig {
     /// straight line (README, *Following the planned segments*).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub off_track_weight: f64,
+    /// The controller also observes its offset from its track
+    /// ([`sim::Env::set_track_observation`]: from where its goal was set in training,
+    /// the planned segment when it executes a plan), so that
+    /// [`ControlConfig::off_track_weight`] and the joint phase's off-track weight price
+    /// something it can see. `false`, the default: the robot's own observation, as in
+    /// the paper.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub observe_track: bool,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -108,6 +116,7 @@ impl ControlConfig {
             near_goals: None,
             fall_penalty: 0.0,
             off_track_weight: 0.0,
+            observe_track: false,
         }
     }
 }
@@ -262,6 +271,7 @@ impl ControlTrainer {
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
         let env_seed: u64 = rng.random();
         let mut envs = VecEnv::new(robot, map, config.ppo.num_envs, env_seed)?;
+        envs.set_track_observation(config.observe_track);
         for e in envs.envs_mut() {
             e.set_max_steps(config.episode_steps);
         }
@@ -349,6 +359,7 @@ impl ControlTrainer {
             policy: self.policy.clone(),
             obs_rms: self.obs_rms.clone(),
             normalize_obs: self.config.ppo.norm_obs,
+            observe_track: self.config.observe_track,
         }
     }
 
@@ -573,6 +584,9 @@ pub struct Controller {
     pub obs_rms: RunningMeanStd,
     /// Whether observations are standardised with `obs_rms` (as in training).
     pub normalize_obs: bool,
+    /// Whether its observations end with the track offset
+    /// ([`ControlConfig::observe_track`]).
+    pub observe_track: bool,
 }
 
 impl Controller {

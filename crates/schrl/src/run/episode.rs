@@ -170,9 +170,7 @@ fn step_run(
     let ended = match run.dispatcher.after_step(&step, env.position()) {
         Dispatch::Continue if follow == Follow::Waypoints => false,
         Dispatch::Continue | Dispatch::NewGoal(_) => {
-            let goal = run.dispatcher.target(follow, env.position()).expect("a run going on has a goal");
-            env.set_goal(&goal)?;
-            env.observe(obs);
+            super::execute::aim(env, &run.dispatcher, follow, obs)?;
             false
         }
         Dispatch::Done(_) => true,
@@ -188,15 +186,23 @@ mod tests {
     /// Steers by a fixed function of the observation and records the rewards and
     /// off-track distances it sees (one row of all runs per step), so two loops that
     /// stepped alike leave the same record.
+    /// With `track_dims`, it also records the length of each run's observed track
+    /// offset (the observation's last `track_dims` numbers) before every step.
     #[derive(Default)]
     struct Recorder {
         rewards: Vec<f64>,
         off_track: Vec<Vec<f64>>,
+        track_dims: usize,
+        observed_off_track: Vec<Vec<f64>>,
     }
 
     impl Driver for Recorder {
         fn act(&mut self, raw: &[f64], live: &[bool], actions: &mut [f64]) {
             let (od, ad) = (raw.len() / live.len(), actions.len() / live.len());
+            if self.track_dims > 0 {
+                let norm = |o: &[f64]| o[od - self.track_dims..].iter().map(|x| x * x).sum::<f64>().sqrt();
+                self.observed_off_track.push(raw.chunks(od).map(norm).collect());
+            }
             for (o, a) in raw.chunks(od).zip(actions.chunks_mut(ad)) {
                 for (k, x) in a.iter_mut().enumerate() {
                     *x = (o.iter().skip(k).step_by(ad).sum::<f64>()).sin();
@@ -210,11 +216,15 @@ mod tests {
         }
     }
 
-    /// Six Point runs through three random goals each, with their paths (start first).
-    fn runs_with_paths(parallel: bool) -> (Vec<Episode>, Recorder, Vec<Vec<Vec<f64>>>) {
+    /// Six Point runs through three random goals each, with their paths (start first);
+    /// with `observe_track`, the environments observe their track offsets.
+    fn runs_with_paths(parallel: bool, observe_track: bool) -> (Vec<Episode>, Recorder, Vec<Vec<Vec<f64>>>) {
         let robot = sim::Robot::Point;
         let mut envs: Vec<Box<dyn Env>> =
             (0..6).map(|_| sim::make_env(robot, robot.default_map()).unwrap()).collect();
+        for env in &mut envs {
+            env.set_track_observation(observe_track);
+        }
         let od = envs[0].observation_space().dim();
         let mut raw = vec![0.0; envs.len() * od];
         let (mut dispatchers, mut paths) = (vec![], vec![]);
@@ -237,14 +247,14 @@ mod tests {
                 .unwrap(),
             );
         }
-        let mut rec = Recorder::default();
+        let mut rec = Recorder { track_dims: if observe_track { 2 } else { 0 }, ..Recorder::default() };
         let episodes =
             drive_threaded(&mut envs, dispatchers, Follow::Waypoints, &mut raw, &mut rec, parallel).unwrap();
         (episodes, rec, paths)
     }
 
     fn runs(parallel: bool) -> (Vec<Episode>, Vec<f64>) {
-        let (episodes, rec, _) = runs_with_paths(parallel);
+        let (episodes, rec, _) = runs_with_paths(parallel, false);
         (episodes, rec.rewards)
     }
 
@@ -253,7 +263,7 @@ mod tests {
     /// its own segment) and not the robot's own chord.
     #[test]
     fn off_track_is_the_distance_from_the_planned_segment_being_driven() {
-        let (episodes, rec, paths) = runs_with_paths(false);
+        let (episodes, rec, paths) = runs_with_paths(false, false);
         let mut largest: f64 = 0.0;
         for (i, (run, path)) in episodes.iter().zip(&paths).enumerate() {
             let reached_at = run.dispatcher.reached_at();
@@ -271,6 +281,38 @@ mod tests {
             }
         }
         assert!(largest > 0.05, "the runs should stray from their segments ({largest} m at most)");
+    }
+
+    /// A controller that observes its track must see the planned segment it is about
+    /// to drive (the next one right after a waypoint), not where it happened to stand
+    /// when the goal changed.
+    #[test]
+    fn observed_track_offset_is_from_the_planned_segment_about_to_be_driven() {
+        let (episodes, rec, paths) = runs_with_paths(false, true);
+        let mut largest: f64 = 0.0;
+        for (i, (run, path)) in episodes.iter().zip(&paths).enumerate() {
+            let reached_at = run.dispatcher.reached_at();
+            for (t, row) in rec.observed_off_track.iter().enumerate() {
+                if t + 1 >= run.trajectory.len() {
+                    continue;
+                }
+                let k = reached_at.iter().filter(|&&s| s <= t).count();
+                let want = sim::segment::point_segment_distance(&run.trajectory[t], &path[k], &path[k + 1]);
+                assert!(
+                    (row[i] - want).abs() < 1e-9,
+                    "run {i} before step {}: {} against {want}",
+                    t + 1,
+                    row[i]
+                );
+                largest = largest.max(want);
+            }
+        }
+        assert!(largest > 0.05, "the runs should stray from their segments ({largest} m at most)");
+        let (plain, _, _) = runs_with_paths(false, false);
+        assert!(
+            episodes.iter().zip(&plain).any(|(a, b)| a.trajectory != b.trajectory),
+            "the driver steers by the whole observation, so the offset should change the runs"
+        );
     }
 
     #[test]

@@ -254,8 +254,9 @@ pub fn evaluate_task_with(
         let g0 = task.sample_starts(&mut rng, per_group)?;
         let noise = task.sample_noise(&mut rng, per_group)?;
         let paths = plans.plan(task, &g0, &noise, &mut rng)?;
-        let mut envs =
-            (0..paths.len()).map(|_| task_env(controller.robot, task)).collect::<Result<Vec<_>, _>>()?;
+        let mut envs = (0..paths.len())
+            .map(|_| task_env(controller.robot, task, controller.observe_track))
+            .collect::<Result<Vec<_>, _>>()?;
         let od = envs.first().map_or(0, |e| e.observation_space().dim());
         let mut raw = vec![0.0; paths.len() * od];
         let mut dispatchers = Vec::with_capacity(paths.len());
@@ -395,6 +396,7 @@ pub fn goal_episodes(
         let n = BATCH.min(episodes - out.len());
         let mut envs =
             VecEnv::new(controller.robot, map.clone(), n, sim::vec_env::member_seed(seed, out.len()))?;
+        envs.set_track_observation(controller.observe_track);
         let od = envs.obs_dim();
         let mut raw = vec![0.0; n * od];
         let mut goals = Vec::with_capacity(n);

@@ -231,12 +231,32 @@ impl Execution {
 }
 
 /// An environment for `robot` executing `task`'s plans: the task's map, and
-/// waypoints counted as reached within [`Task::waypoint_reach`].
-pub fn task_env(robot: sim::Robot, task: &Task) -> Result<Box<dyn Env>, sim::EnvError> {
+/// waypoints counted as reached within [`Task::waypoint_reach`]; with
+/// `observe_track`, observations end with the offset from the planned segment being
+/// driven (for a controller trained so, [`crate::control::ControlConfig::observe_track`]).
+pub fn task_env(robot: sim::Robot, task: &Task, observe_track: bool) -> Result<Box<dyn Env>, sim::EnvError> {
     let mut env = sim::make_env(robot, task.map.clone())?;
     let reach = task.waypoint_reach(env.reach_radius());
     env.set_reach_radius(reach)?;
+    env.set_track_observation(observe_track);
     Ok(env)
+}
+
+/// Sets `env`'s goal to what `follow` gives on `dispatcher`'s current segment (if the
+/// run goes on), the segment's first waypoint as the goal's origin (the track a
+/// controller that observes it sees), and writes the observation.
+pub fn aim(
+    env: &mut dyn Env,
+    dispatcher: &WaypointDispatcher,
+    follow: Follow,
+    obs: &mut [f64],
+) -> Result<(), sim::EnvError> {
+    if let (Some(goal), Some((from, _))) = (dispatcher.target(follow, env.position()), dispatcher.segment()) {
+        env.set_goal(&goal)?;
+        env.set_goal_origin(from)?;
+        env.observe(obs);
+    }
+    Ok(())
 }
 
 /// Puts `env` at a path's start with the goal `follow` gives there (the first
@@ -252,9 +272,6 @@ pub fn start_run(
     env.set_max_steps(limit);
     env.reset_into(seed, Some(&path[0]), obs)?;
     let d = WaypointDispatcher::new(path[0].clone(), path[1..].to_vec(), limit);
-    if let Some(goal) = d.target(follow, env.position()) {
-        env.set_goal(&goal)?;
-        env.observe(obs);
-    }
+    aim(env, &d, follow, obs)?;
     Ok(d)
 }

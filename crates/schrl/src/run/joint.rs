@@ -633,7 +633,9 @@ impl JointTrainer {
         let mut plan = PlanTrainer::new(planned, cpg)?
             .with_control_reward(PathLengthReward { weight: config.length_weight });
         plan.limit_joint_step(config.plan_step_limit)?;
-        let envs = (0..config.plan_batch).map(|_| task_env(robot, &task)).collect::<Result<Vec<_>, _>>()?;
+        let envs = (0..config.plan_batch)
+            .map(|_| task_env(robot, &task, control.config.observe_track))
+            .collect::<Result<Vec<_>, _>>()?;
         if let Some(env) = envs.first() {
             config
                 .follow

@@ -79,6 +79,7 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<ControlTrainer, StoreError> {
     let n = state.config.ppo.num_envs;
     let env_err = |e: sim::EnvError| bad(e.to_string());
     let mut envs = VecEnv::new(robot, map, n, 0).map_err(env_err)?;
+    envs.set_track_observation(state.config.observe_track);
     if envs.obs_dim() != state.obs_dim || envs.act_dim() != state.act_dim {
         return Err(bad(format!(
             "saved for a {robot} with {} observations and {} actions, but this build's {robot} has {} and {}: \
