@@ -36,6 +36,7 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
         "5",
         "--off-track-weight",
         "0.2",
+        "--observe-track",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stdout(&o).contains("success rate: "), "{}", stdout(&o));
@@ -48,6 +49,7 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
     assert_eq!(manifest["settings"]["ppo"]["hidden"], serde_json::json!([16, 8]));
     assert_eq!(manifest["settings"]["fall_penalty"], 5.0);
     assert_eq!(manifest["settings"]["off_track_weight"], 0.2);
+    assert_eq!(manifest["settings"]["observe_track"], true);
     for f in ["controller.safetensors", "controller.json"] {
         assert!(manifest["files"][f]["sha256"].is_string(), "{f} not in the manifest");
     }
