@@ -410,11 +410,15 @@ impl<D: Dynamics> GoalEnv<D> {
             let p = self.robot.plan_position();
             let (a, b) = (&self.goal_origin, &self.goal);
             let s = crate::segment::closest_fraction(p, a, b);
-            let d: Vec<f64> = (0..D::PLAN_DIM).map(|k| a[k] + s * (b[k] - a[k]) - p[k]).collect();
+            // Plan spaces are 2-D or 3-D; no allocation on the step's path.
+            let mut d = [0.0; 3];
+            for (k, dk) in d.iter_mut().enumerate().take(D::PLAN_DIM) {
+                *dk = a[k] + s * (b[k] - a[k]) - p[k];
+            }
             let (sin, cos) = self.robot.yaw().sin_cos();
             track[0] = cos * d[0] + sin * d[1];
             track[1] = -sin * d[0] + cos * d[1];
-            track[2..].copy_from_slice(&d[2..]);
+            track[2..].copy_from_slice(&d[2..D::PLAN_DIM]);
         }
     }
 }
