@@ -71,7 +71,7 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
 
     let o = schrl(&["control", "train", "--resume", "--robot", "car", "--out", out]);
     assert!(!o.status.success() && stderr(&o).contains("--robot differs"), "{}", stderr(&o));
-    for (flag, value) in [("--hidden", "64,64"), ("--fall-penalty", "0")] {
+    for (flag, value) in [("--hidden", "64,64"), ("--fall-penalty", "0"), ("--observe-track", "false")] {
         let o = schrl(&["control", "train", "--resume", flag, value, "--out", out]);
         assert!(!o.status.success() && stderr(&o).contains(&format!("{flag} differs")), "{}", stderr(&o));
     }

@@ -135,6 +135,33 @@ fn table1_runs_doggo_at_quick_size() {
     assert_eq!(r["robot"], "doggo");
     assert!(r["rows"]["schrl"]["satisfaction"].is_number(), "{r}");
     assert!(out.join("table1.png").exists());
+    // The Doggo's defaults: its controller observes and pays for its track, and so
+    // does the joint phase (README, *The track in the controller's observation*).
+    let manifests = manifests_under(out);
+    let kind = |k: &str| manifests.iter().filter(move |m| m["kind"] == k).collect::<Vec<_>>();
+    assert!(!kind("controller").is_empty() && !kind("joint").is_empty(), "{manifests:?}");
+    for m in kind("controller") {
+        assert_eq!(m["settings"]["observe_track"], true, "{m}");
+        assert_eq!(m["settings"]["off_track_weight"], 0.1, "{m}");
+    }
+    for m in kind("joint") {
+        assert_eq!(m["settings"]["joint"]["off_track_weight"], 0.1, "{m}");
+    }
+}
+
+/// Every run manifest in `dir`'s tree.
+#[cfg(feature = "mujoco")]
+fn manifests_under(dir: &Path) -> Vec<serde_json::Value> {
+    let mut found = vec![];
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            found.extend(manifests_under(&path));
+        } else if path.file_name().is_some_and(|n| n == "manifest.json") {
+            found.push(serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap());
+        }
+    }
+    found
 }
 
 #[test]

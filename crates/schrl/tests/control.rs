@@ -263,3 +263,16 @@ fn an_option_chases_one_goal_and_each_reach_ends_its_episode() {
     off.goal = Some(vec![99.0, 0.0]);
     assert!(ControlTrainer::new(off).err().expect("refused").to_string().contains("goal"));
 }
+
+/// The Doggo alone observes and pays for its track by default (README, *The track in
+/// the controller's observation*); the other robots keep the paper's reward and
+/// observation.
+#[test]
+fn only_the_doggo_observes_and_pays_for_its_track_by_default() {
+    for robot in Robot::ALL {
+        let c = ControlConfig::for_robot(robot);
+        let doggo = robot == Robot::Doggo;
+        assert_eq!(c.observe_track, doggo, "{robot:?}");
+        assert_eq!(c.off_track_weight, if doggo { 0.1 } else { 0.0 }, "{robot:?}");
+    }
+}

@@ -63,14 +63,16 @@ pub struct TrainArgs {
     #[arg(long, value_name = "REWARD")]
     fall_penalty: Option<f64>,
     /// Reward PPO loses per step per metre the robot strays from the straight segment
-    /// between where its goal was set and the goal (0: the paper's reward) [default: 0].
+    /// between where its goal was set and the goal (0: the paper's reward) [default: 0.1
+    /// for the Doggo, 0 for the others].
     #[arg(long)]
     off_track_weight: Option<f64>,
     /// The controller also observes its offset from its track (from where its goal was
-    /// set; the planned segment when it executes a plan), in its heading frame [default:
-    /// off, the robot's own observation].
-    #[arg(long)]
-    observe_track: bool,
+    /// set; the planned segment when it executes a plan), in its heading frame; `false`:
+    /// the robot's own observation, the paper's [default: true for the Doggo, false for
+    /// the others; the bare flag: true].
+    #[arg(long, value_name = "BOOL", num_args = 0..=1, default_missing_value = "true")]
+    observe_track: Option<bool>,
     #[command(flatten)]
     run: super::RunDirArgs,
     /// Save a checkpoint every this many updates (and at the end).
@@ -156,7 +158,7 @@ impl TrainArgs {
         config.near_goals = self.near_goals(config.near_goals);
         config.fall_penalty = self.fall_penalty.unwrap_or(config.fall_penalty);
         config.off_track_weight = self.off_track_weight.unwrap_or(config.off_track_weight);
-        config.observe_track = self.observe_track;
+        config.observe_track = self.observe_track.unwrap_or(config.observe_track);
         Ok(config)
     }
 
@@ -194,7 +196,7 @@ impl TrainArgs {
                 ),
                 ("--fall-penalty", differs(&self.fall_penalty, &saved.fall_penalty)),
                 ("--off-track-weight", differs(&self.off_track_weight, &saved.off_track_weight)),
-                ("--observe-track", self.observe_track && !saved.observe_track),
+                ("--observe-track", differs(&self.observe_track, &saved.observe_track)),
             ],
         )?;
         Ok(ControlConfig { total_steps: self.steps.unwrap_or(saved.total_steps), ..saved.clone() })

@@ -113,7 +113,8 @@ pub struct TrainArgs {
     #[arg(long, value_name = "waypoints|carrot:METRES")]
     follow: Option<Follow>,
     /// Reward the joint phase's controller loses per step per metre it strays from the
-    /// planned segment it drives (0: the paper's reward) [default: 0].
+    /// planned segment it drives (0: the paper's reward) [default: 0.1 for the Doggo, 0
+    /// for the others].
     #[arg(long)]
     off_track_weight: Option<f64>,
     /// Weight per metre of the path-length term the planner follows in the joint phase

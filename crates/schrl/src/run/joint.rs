@@ -139,8 +139,10 @@ pub struct JointConfig {
     /// Subtracted, times the robot's distance (m) from the planned segment it drives
     /// (from the waypoint before to the current one), from the reward of every step the
     /// joint phase's controller learns from; the runs' own returns and `r_l` stay the
-    /// environment's. 0 (the default, the paper's reward, and runs saved before it
-    /// existed): a controller that swings wide of a turn pays only when it collides.
+    /// environment's. 0 (the paper's reward, runs saved before it existed, and the
+    /// default of [`JointRunSettings::for_task`] for every robot but the Doggo,
+    /// [`crate::control::trainer::default_off_track_weight`]): a controller that swings
+    /// wide of a turn pays only when it collides.
     /// The planner checks clearance along those segments (README, *Following the
     /// planned segments*).
     #[serde(default)]
@@ -280,8 +282,8 @@ impl SettingError {
 
 impl JointRunSettings {
     /// The default settings of a run of `task` from `seed`: the planner's goal discs
-    /// shrunk by the robot's reach radius, [`DEFAULT_SAFE_MARGIN`] more clearance, and
-    /// each config's own defaults.
+    /// shrunk by the robot's reach radius, [`DEFAULT_SAFE_MARGIN`] more clearance, the
+    /// robot's off-track weight, and each config's own defaults.
     pub fn for_task(task: &Task, seed: u64) -> Result<Self, RunError> {
         let goal_margin = sim::make_env(task.robot, task.map.clone())?.reach_radius();
         Ok(Self {
@@ -292,7 +294,12 @@ impl JointRunSettings {
             steps: DEFAULT_STEPS,
             target: None,
             controller: None,
-            joint: JointConfig { goal_margin, safe_margin: DEFAULT_SAFE_MARGIN, ..JointConfig::default() },
+            joint: JointConfig {
+                goal_margin,
+                safe_margin: DEFAULT_SAFE_MARGIN,
+                off_track_weight: crate::control::trainer::default_off_track_weight(task.robot),
+                ..JointConfig::default()
+            },
             cpg: CpgConfig { seed, ..CpgConfig::default() },
             pretrain: crate::plan::pretrain::PretrainConfig::default(),
             eval_groups: crate::run::evaluate::EVAL_GROUPS,
