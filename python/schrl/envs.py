@@ -22,6 +22,14 @@ Reward: the decrease of the distance to the goal, plus a bonus on reaching it;
 ``info``: ``reached``, ``collided``, ``fell``. ``reset(options={"start": xy, "goal":
 xy})`` places the robot and the goal; :meth:`RobotEnv.set_goal` moves the goal
 mid-episode (a new waypoint).
+
+``observe_track=True`` (``gym.make(..., observe_track=True)``, both classes) ends every
+observation with the robot's offset from its *track*, the straight segment from where
+the goal was set (or ``set_goal(goal, origin=...)``, a planned segment's first
+waypoint) to the goal: the nearest point of the segment less the robot's position, in
+the robot's heading frame (forward, left; up for the Drone). schrl's Doggo controllers
+observe it by default (README, *The track in the controller's observation*); the other
+robots' observations, and this option's default, are the paper's.
 """
 
 import numpy as np
@@ -47,10 +55,10 @@ class RobotEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
 
-    def __init__(self, robot="point", map=None, max_episode_steps=None, render_mode=None):
+    def __init__(self, robot="point", map=None, max_episode_steps=None, render_mode=None, observe_track=False):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        self._native = NativeEnv(robot, map)
+        self._native = NativeEnv(robot, map, bool(observe_track))
         self.robot = robot
         self.observation_space = _box(self._native.observation_bounds)
         self.action_space = _box(self._native.action_bounds)
@@ -78,9 +86,16 @@ class RobotEnv(gym.Env):
         obs, reward, terminated, truncated, info = self._native.step(action.tolist())
         return obs, float(reward), bool(terminated), bool(truncated), info
 
-    def set_goal(self, goal):
-        """Moves the goal (a free position); returns the observation that sees it."""
-        return self._native.set_goal([float(x) for x in goal])
+    def set_goal(self, goal, origin=None):
+        """Moves the goal (a free position); returns the observation that sees it. The
+        track starts at ``origin`` if given, else where the robot stands."""
+        origin = None if origin is None else [float(x) for x in origin]
+        return self._native.set_goal([float(x) for x in goal], origin)
+
+    @property
+    def goal_origin(self):
+        """Where the track to the goal starts."""
+        return np.array(self._native.goal_origin)
 
     @property
     def position(self):
@@ -106,8 +121,8 @@ class RobotVecEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    def __init__(self, num_envs, robot="point", map=None):
-        self._native = NativeVecEnv(robot, int(num_envs), map)
+    def __init__(self, num_envs, robot="point", map=None, observe_track=False):
+        self._native = NativeVecEnv(robot, int(num_envs), map, bool(observe_track))
         self.num_envs = int(num_envs)
         self.robot = robot
         self.single_observation_space = _box(self._native.observation_bounds)

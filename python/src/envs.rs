@@ -57,11 +57,14 @@ pub struct PyEnv {
 
 #[pymethods]
 impl PyEnv {
+    /// With `observe_track`, observations end with the robot's offset from its track,
+    /// the segment from [`Env::goal_origin`] to the goal (`sim::Env::set_track_observation`).
     #[new]
-    #[pyo3(signature = (robot, map = None))]
-    fn new(robot: &str, map: Option<&str>) -> PyResult<Self> {
+    #[pyo3(signature = (robot, map = None, observe_track = false))]
+    fn new(robot: &str, map: Option<&str>, observe_track: bool) -> PyResult<Self> {
         let (robot, map) = robot_and_map(robot, map)?;
-        let env = sim::make_env(robot, map).map_err(env_error)?;
+        let mut env = sim::make_env(robot, map).map_err(env_error)?;
+        env.set_track_observation(observe_track);
         let obs = vec![0.0; env.observation_space().dim()];
         Ok(Self { env, obs, trail: vec![] })
     }
@@ -106,9 +109,20 @@ impl PyEnv {
         Ok((self.obs.clone().into_pyarray(py), step.reward, step.terminated(), step.truncated, info))
     }
 
-    /// Sets the goal (a free position) and returns the observation that sees it.
-    fn set_goal<'py>(&mut self, py: Python<'py>, goal: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    /// Sets the goal (a free position) and returns the observation that sees it. The
+    /// track then starts where the robot stands, or at `origin` if given (a planned
+    /// segment's first waypoint).
+    #[pyo3(signature = (goal, origin = None))]
+    fn set_goal<'py>(
+        &mut self,
+        py: Python<'py>,
+        goal: Vec<f64>,
+        origin: Option<Vec<f64>>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         self.env.set_goal(&goal).map_err(env_error)?;
+        if let Some(origin) = origin {
+            self.env.set_goal_origin(&origin).map_err(env_error)?;
+        }
         self.env.observe(&mut self.obs);
         Ok(self.obs.clone().into_pyarray(py))
     }
@@ -117,6 +131,19 @@ impl PyEnv {
     #[getter]
     fn goal(&self) -> Vec<f64> {
         self.env.goal().to_vec()
+    }
+
+    /// Where the current track starts (the robot's position when the goal was set,
+    /// unless `set_goal` was given an origin).
+    #[getter]
+    fn goal_origin(&self) -> Vec<f64> {
+        self.env.goal_origin().to_vec()
+    }
+
+    /// Whether observations end with the track offset.
+    #[getter]
+    fn observe_track(&self) -> bool {
+        self.env.track_observation()
     }
 
     /// The robot's position (plan space: x, y; x, y, z for the Drone).
@@ -174,14 +201,16 @@ pub struct PyVecEnv {
 
 #[pymethods]
 impl PyVecEnv {
+    /// `observe_track`: as [`PyEnv`]'s, for every environment.
     #[new]
-    #[pyo3(signature = (robot, num_envs, map = None))]
-    fn new(robot: &str, num_envs: usize, map: Option<&str>) -> PyResult<Self> {
+    #[pyo3(signature = (robot, num_envs, map = None, observe_track = false))]
+    fn new(robot: &str, num_envs: usize, map: Option<&str>, observe_track: bool) -> PyResult<Self> {
         if num_envs == 0 {
             return Err(PyValueError::new_err("num_envs must be at least 1"));
         }
         let (robot, map) = robot_and_map(robot, map)?;
-        let envs = VecEnv::new(robot, map, num_envs, 0).map_err(env_error)?;
+        let mut envs = VecEnv::new(robot, map, num_envs, 0).map_err(env_error)?;
+        envs.set_track_observation(observe_track);
         let obs = vec![0.0; num_envs * envs.obs_dim()];
         Ok(Self { steps: vec![sim::Step::default(); num_envs], envs, obs })
     }

@@ -82,6 +82,32 @@ def test_starts_and_goals_can_be_set_and_driving_at_the_goal_reaches_it():
         env.step(np.zeros(5))
 
 
+@pytest.mark.parametrize("robot", list(ROBOTS.values()))
+def test_the_track_offset_points_from_the_robot_to_its_segment_in_its_own_frame(robot):
+    plain, tracked = RobotEnv(robot), RobotEnv(robot, observe_track=True)
+    dim = len(tracked.position)
+    assert tracked.observation_space.shape[0] == plain.observation_space.shape[0] + dim
+    check_env(tracked, skip_render_check=True)
+    start = [0.0, 0.0, 1.0][:dim]
+    obs, _ = tracked.reset(seed=4, options={"start": start, "goal": [2.0, 0.0, 1.0][:dim]})
+    # Right after a reset the track starts where the robot stands: no offset.
+    np.testing.assert_allclose(tracked.goal_origin, tracked.position)
+    np.testing.assert_allclose(obs[-dim:], 0.0, atol=1e-9)
+    # A segment along y = 1 from x = -1 to 1, the robot near the origin: the offset is
+    # (0, 1 - y) in the world, turned into the robot's heading frame (forward, left).
+    x, y = tracked.position[:2]
+    assert abs(x) < 0.5 and abs(y) < 0.5
+    obs = tracked.set_goal([1.0, 1.0, 1.0][:dim], origin=[-1.0, 1.0, 1.0][:dim])
+    np.testing.assert_allclose(tracked.goal_origin, [-1.0, 1.0, 1.0][:dim])
+    heading = tracked.unwrapped._native.heading
+    np.testing.assert_allclose(obs[-dim:][:2], (1.0 - y) * np.array([np.sin(heading), np.cos(heading)]), atol=1e-9)
+    if dim == 3:
+        np.testing.assert_allclose(obs[-1], 1.0 - tracked.position[2], atol=1e-9)
+    # The vector env observes the same extra entries.
+    vec = RobotVecEnv(2, robot=robot, observe_track=True)
+    assert vec.single_observation_space.shape == tracked.observation_space.shape
+
+
 def test_frames_are_rgb_arrays():
     env = RobotEnv("drone", map="duck", render_mode="rgb_array")
     env.reset(seed=1)

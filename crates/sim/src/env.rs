@@ -410,7 +410,9 @@ impl<D: Dynamics> GoalEnv<D> {
             let p = self.robot.plan_position();
             let (a, b) = (&self.goal_origin, &self.goal);
             let s = crate::segment::closest_fraction(p, a, b);
-            // Plan spaces are 2-D or 3-D; no allocation on the step's path.
+            // Plan spaces are 2-D or 3-D (checked when the robot's code is compiled);
+            // no allocation on the step's path.
+            const { assert!(D::PLAN_DIM == 2 || D::PLAN_DIM == 3, "a plan space is 2-D or 3-D") };
             let mut d = [0.0; 3];
             for (k, dk) in d.iter_mut().enumerate().take(D::PLAN_DIM) {
                 *dk = a[k] + s * (b[k] - a[k]) - p[k];

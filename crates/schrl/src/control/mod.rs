@@ -13,4 +13,6 @@ pub mod trainer;
 
 pub use policy::ActorCritic;
 pub use ppo::{PpoConfig, PpoLearner};
-pub use trainer::{ControlConfig, ControlError, ControlMetrics, ControlTrainer, Controller, NearGoals};
+pub use trainer::{
+    ControlConfig, ControlError, ControlMetrics, ControlTrainer, Controller, NearGoals, TrackDefaults,
+};

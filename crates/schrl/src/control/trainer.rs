@@ -58,7 +58,7 @@ pub struct ControlConfig {
     /// where its goal was set and the goal ([`sim::Env::goal_origin`]), from the reward
     /// PPO learns from on every step (the logged returns stay the environment's). 0 (the
     /// paper's reward, and every robot's default but the Doggo's,
-    /// [`default_off_track_weight`]): a robot may arc to a goal behind it as freely as
+    /// [`TrackDefaults`]): a robot may arc to a goal behind it as freely as
     /// turn first; a plan's segments are only clear of walls close to the straight line
     /// (README, *Following the planned segments*).
     #[serde(default, skip_serializing_if = "is_zero")]
@@ -68,7 +68,7 @@ pub struct ControlConfig {
     /// the planned segment when it executes a plan), so that
     /// [`ControlConfig::off_track_weight`] and the joint phase's off-track weight price
     /// something it can see. `true` by default for the Doggo only
-    /// ([`default_off_track_weight`]); `false`: the robot's own observation, as in the
+    /// ([`TrackDefaults`]); `false`: the robot's own observation, as in the
     /// paper.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub observe_track: bool,
@@ -117,23 +117,35 @@ impl ControlConfig {
             goal: None,
             near_goals: None,
             fall_penalty: 0.0,
-            off_track_weight: default_off_track_weight(robot),
-            observe_track: robot == Robot::Doggo,
+            off_track_weight: TrackDefaults::for_robot(robot).off_track_weight,
+            observe_track: TrackDefaults::for_robot(robot).observe,
         }
     }
 }
 
-/// The default weight on straying from the track, in controller training
-/// ([`ControlConfig::off_track_weight`]) and in the joint phase
-/// ([`crate::run::joint::JointConfig::off_track_weight`]): 0.1 for the Doggo, whose controller
-/// also observes its track by default ([`ControlConfig::observe_track`]); chosen on
-/// seed 0's Seq (0.526 → 0.940 of 5 × 100 runs) and kept on held-out seed 5 (0.754 →
-/// 0.810; README, *The track in the controller's observation*). 0, the paper's reward,
-/// for the other robots: tried on the Car and not kept (README, *Car and Drone*).
-pub fn default_off_track_weight(robot: Robot) -> f64 {
-    match robot {
-        Robot::Doggo => 0.1,
-        Robot::Point | Robot::Car | Robot::Drone => 0.0,
+/// How a robot's controller is held to its track by default: whether it observes its
+/// offset from the track ([`ControlConfig::observe_track`]) and the weight on straying
+/// from it, in controller training ([`ControlConfig::off_track_weight`]) and in the joint
+/// phase ([`crate::run::joint::JointConfig::off_track_weight`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrackDefaults {
+    /// The controller observes its offset from its track.
+    pub observe: bool,
+    /// The weight on the distance from the track, subtracted from the reward.
+    pub off_track_weight: f64,
+}
+
+impl TrackDefaults {
+    /// The Doggo observes its track and pays 0.1 a metre off it: chosen on seed 0's Seq
+    /// (0.526 → 0.940 of 5 × 100 runs) and kept on held-out seed 5 (0.754 → 0.810;
+    /// README, *The track in the controller's observation*). The other robots keep the
+    /// paper's observation and reward: the track was tried on the Car and not kept
+    /// (README, *The track in the Car's observation*).
+    pub fn for_robot(robot: Robot) -> Self {
+        match robot {
+            Robot::Doggo => Self { observe: true, off_track_weight: 0.1 },
+            Robot::Point | Robot::Car | Robot::Drone => Self { observe: false, off_track_weight: 0.0 },
+        }
     }
 }
 

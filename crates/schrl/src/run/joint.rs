@@ -141,7 +141,7 @@ pub struct JointConfig {
     /// joint phase's controller learns from; the runs' own returns and `r_l` stay the
     /// environment's. 0 (the paper's reward, runs saved before it existed, and the
     /// default of [`JointRunSettings::for_task`] for every robot but the Doggo,
-    /// [`crate::control::trainer::default_off_track_weight`]): a controller that swings
+    /// [`crate::control::trainer::TrackDefaults`]): a controller that swings
     /// wide of a turn pays only when it collides.
     /// The planner checks clearance along those segments (README, *Following the
     /// planned segments*).
@@ -297,7 +297,8 @@ impl JointRunSettings {
             joint: JointConfig {
                 goal_margin,
                 safe_margin: DEFAULT_SAFE_MARGIN,
-                off_track_weight: crate::control::trainer::default_off_track_weight(task.robot),
+                off_track_weight: crate::control::trainer::TrackDefaults::for_robot(task.robot)
+                    .off_track_weight,
                 ..JointConfig::default()
             },
             cpg: CpgConfig { seed, ..CpgConfig::default() },
