@@ -322,6 +322,8 @@ fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
             "1",
             "--save-every",
             "2",
+            "--select-every",
+            "3",
             "--eval-groups",
             "0",
             "--out",
@@ -335,6 +337,30 @@ fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
     let o = schrl(&args(straight.to_str().unwrap()));
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(manifest(&straight)["settings"]["pretrain"]["updates"] == 20);
+    // Validated at the first, every third and the last iteration; the best is kept
+    // apart and is what `schrl eval` deploys.
+    let generation = generation(&straight).unwrap();
+    let selection: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(straight.join(format!("gen-{generation}")).join("selection.json")).unwrap(),
+    )
+    .unwrap();
+    let its: Vec<u64> = selection["validations"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v["iteration"].as_u64().unwrap())
+        .collect();
+    let last = *its.last().unwrap();
+    assert!(
+        its.len() >= 3 && its[..its.len() - 1].iter().enumerate().all(|(i, &it)| it == 3 * i as u64),
+        "{its:?}"
+    );
+    assert!(last > its[its.len() - 2], "{its:?}");
+    let best = &selection["validations"][selection["best"].as_u64().unwrap() as usize];
+    let deployed = best["iteration"].as_u64().unwrap();
+    let o = schrl(&["eval", "--ckpt", straight.to_str().unwrap(), "--groups", "1", "--per-group", "2"]);
+    let said = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(said.contains(&format!("deployed: the checkpoint of iteration {deployed} ")), "{said}");
 
     let k = killed.to_str().unwrap();
     let a = args(k);
@@ -347,6 +373,7 @@ fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
         3,
     );
     assert_eq!(files(&killed), files(&straight));
+    assert_eq!(files(&killed.join("best")), files(&straight.join("best")));
 
     let s = stopped.to_str().unwrap();
     let a = args(s);
@@ -359,4 +386,5 @@ fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
     let o = schrl(&["train", "--resume", "--out", s]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(files(&stopped), files(&straight));
+    assert_eq!(files(&stopped.join("best")), files(&straight.join("best")));
 }

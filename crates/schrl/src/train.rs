@@ -7,7 +7,9 @@
 //! phase ([`JointTrainer::iterate`], a checkpoint every `save_every` iterations and at
 //! the end, one metrics line per iteration) until the step budget or the target, then
 //! the training curve and, with `eval_groups > 0`, the evaluation of the mean plans
-//! with its picture.
+//! with its picture. A run with `select_every > 0` validates its deployed pair at the
+//! first iteration, every `select_every` iterations and the last, and its result (the
+//! evaluation, `schrl eval`) is the best validated checkpoint ([`crate::run::select`]).
 //!
 //! A caller watches through a [`Watcher`]: progress of each stage, notes worth a
 //! user's eye, and whether to stop (Ctrl-C): a stopped run saves its checkpoint first,
@@ -21,6 +23,7 @@ use crate::plan::pretrain::{PretrainProgress, pretrain};
 use crate::run::RunError;
 use crate::run::evaluate::{EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task};
 use crate::run::joint::{JointMetrics, JointRunSettings, JointTrainer, SettingError};
+use crate::run::select::{Selection, Validation};
 use crate::store::{self, Existing, MetricsLog, RunKind, RunWriter, StoreError};
 
 /// Iterations the early stop and the progress figures average over.
@@ -132,6 +135,9 @@ pub struct Trained {
     pub evaluation: Option<TaskEval>,
     /// The pictures written: the training curve, then the evaluation's runs.
     pub pictures: Vec<PathBuf>,
+    /// For a run that selects, the validation of the checkpoint deployed (and
+    /// evaluated); `None` otherwise or when stopped.
+    pub selected: Option<Validation>,
 }
 
 /// The settings a resumed run may change; `None` keeps the saved value.
@@ -153,6 +159,7 @@ pub struct RunSession {
     run: RunWriter,
     settings: JointRunSettings,
     saved: Option<JointTrainer>,
+    selection: Option<Selection>,
     notes: Vec<String>,
 }
 
@@ -163,7 +170,13 @@ impl RunSession {
         settings.validate()?;
         let notes = settings.task()?.warnings().into_iter().map(|w| format!("warning: {w}")).collect();
         let run = RunWriter::create(dir, RunKind::Joint, &settings, existing)?;
-        Ok(Self { run, settings, saved: None, notes })
+        // A replaced run's best checkpoint goes with it.
+        let best = dir.join(store::joint::BEST);
+        if best.exists() {
+            std::fs::remove_dir_all(&best)
+                .map_err(|e| StoreError::Io { path: best.clone(), message: e.to_string() })?;
+        }
+        Ok(Self { run, settings, saved: None, selection: None, notes })
     }
 
     /// The run saved in `dir`, to continue from its last checkpoint with its saved
@@ -172,7 +185,8 @@ impl RunSession {
         let (run, ckpt) = RunWriter::resume(dir, RunKind::Joint)?;
         let settings: JointRunSettings = run.settings()?;
         let saved = if ckpt.has_files() { Some(store::joint::load_from(&ckpt)?) } else { None };
-        Ok(Self { run, settings, saved, notes: vec![] })
+        let selection = if ckpt.has_files() { store::joint::load_selection(&ckpt)? } else { None };
+        Ok(Self { run, settings, saved, selection, notes: vec![] })
     }
 
     /// Changes what a resumed run may change (the rest of its settings are what its
@@ -220,6 +234,18 @@ impl RunSession {
         let done = trainer.iterations;
         let (mut log, mut history) =
             MetricsLog::open(&self.run, resumed, |m: &JointMetrics| m.iteration <= done)?;
+        let mut selector = match s.select_every {
+            0 => None,
+            every => Some(Selector {
+                every,
+                selection: self.selection.take().unwrap_or_default(),
+                dir: self.run.dir().join(store::joint::BEST),
+                writer: None,
+            }),
+        };
+        if let Some(sel) = &mut selector {
+            sel.validate_if_due(&trainer, false, s, watcher)?;
+        }
         let mut stop = Stop::Steps;
         while trainer.env_steps < s.steps {
             let m = trainer.iterate()?;
@@ -234,10 +260,15 @@ impl RunSession {
                 satisfaction,
                 plan_satisfaction: mean(|m| m.plan_satisfaction),
             });
-            if trainer.iterations.is_multiple_of(s.save_every) {
-                self.run.save(|f| store::joint::save_into(f, &trainer))?;
+            let target = target_met(s.target, recent.len(), satisfaction);
+            if let Some(sel) = &mut selector {
+                let last = target || trainer.env_steps >= s.steps;
+                sel.validate_if_due(&trainer, last, s, watcher)?;
             }
-            if target_met(s.target, recent.len(), satisfaction) {
+            if trainer.iterations.is_multiple_of(s.save_every) {
+                save(&mut self.run, &trainer, &selector)?;
+            }
+            if target {
                 stop = Stop::Target;
                 break;
             }
@@ -246,17 +277,24 @@ impl RunSession {
                 break;
             }
         }
-        self.run.save(|f| store::joint::save_into(f, &trainer))?;
+        save(&mut self.run, &trainer, &selector)?;
         let seconds = start.elapsed().as_secs_f64();
-        let mut trained = Trained { trainer, history, stop, seconds, evaluation: None, pictures: vec![] };
+        let selected = selector.as_ref().and_then(|sel| sel.selection.best().copied());
+        let mut trained =
+            Trained { trainer, history, stop, seconds, evaluation: None, pictures: vec![], selected: None };
         if stop == Stop::Requested {
             return Ok(trained);
         }
         let curve = self.run.dir().join("training_curve.png");
         save_curve(&trained.history, &curve)?;
         trained.pictures.push(curve);
+        trained.selected = selected;
         if s.eval_groups > 0 {
-            let t = &trained.trainer;
+            let best = match &selector {
+                Some(sel) => Some(store::joint::load(&sel.dir)?),
+                None => None,
+            };
+            let t = best.as_ref().unwrap_or(&trained.trainer);
             let eval = evaluate_task(
                 &t.task,
                 Plans::Mean(t.plan.planner()),
@@ -270,6 +308,69 @@ impl RunSession {
             trained.evaluation = Some(eval);
         }
         Ok(trained)
+    }
+}
+
+/// Saves `trainer` as the run's checkpoint, with a selecting run's validations.
+fn save(run: &mut RunWriter, trainer: &JointTrainer, selector: &Option<Selector>) -> Result<(), StoreError> {
+    run.save(|f| {
+        store::joint::save_into(f, trainer)?;
+        match selector {
+            Some(sel) => store::joint::save_selection(f, &sel.selection),
+            None => Ok(()),
+        }
+    })
+}
+
+/// A selecting run's validations and its best checkpoint's directory.
+struct Selector {
+    /// Iterations between validations.
+    every: usize,
+    selection: Selection,
+    /// `DIR/best`.
+    dir: PathBuf,
+    /// Its writer, once the run has validated in this process.
+    writer: Option<RunWriter>,
+}
+
+impl Selector {
+    /// Validates `t` if due ([`Selection::due`]); a new best replaces `DIR/best`
+    /// before the run's next checkpoint records it, so a run killed in between
+    /// repeats the validation and writes the same best again.
+    fn validate_if_due(
+        &mut self,
+        t: &JointTrainer,
+        last: bool,
+        settings: &JointRunSettings,
+        watcher: &mut dyn Watcher,
+    ) -> Result<(), TrainError> {
+        if !self.selection.due(t.iterations, self.every, last) {
+            return Ok(());
+        }
+        let v = Validation::of(t)?;
+        if self.selection.record(v) {
+            let writer = match self.writer.take() {
+                Some(w) => w,
+                None if self.dir.join(store::MANIFEST).exists() => {
+                    RunWriter::resume(&self.dir, RunKind::Joint)?.0
+                }
+                None => RunWriter::create(&self.dir, RunKind::Joint, settings, Existing::Refuse)?,
+            };
+            let writer = self.writer.insert(writer);
+            writer.save(|f| store::joint::save_into(f, t))?;
+        }
+        let best = self.selection.best().expect("recorded above");
+        let steps = |v: &Validation| v.steps_to_reach.map_or("-".into(), |s| format!("{s:.0}"));
+        watcher.note(&format!(
+            "validation at iteration {} ({} steps): satisfaction {:.3}, steps to reach {}; best: iteration {} ({:.3})",
+            v.iteration,
+            v.env_steps,
+            v.satisfaction,
+            steps(&v),
+            best.iteration,
+            best.satisfaction
+        ));
+        Ok(())
     }
 }
 

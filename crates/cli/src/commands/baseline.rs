@@ -539,7 +539,7 @@ fn eval(args: EvalArgs) -> Result<()> {
             (t.task.clone(), FlatBaseline::evaluate(&t, sizes, args.seed)?)
         }
         RunKind::Joint => {
-            let t = store::joint::load(&args.ckpt).map_err(super::store_error)?;
+            let (t, _) = store::joint::load_deployed(&args.ckpt).map_err(super::store_error)?;
             let plans = Plans::Mean(t.plan.planner());
             let e = evaluate_task(&t.task, plans, &t.control.controller(), sizes, args.seed)?;
             (t.task.clone(), e)

@@ -637,7 +637,7 @@ fn compare(args: CompareArgs) -> Result<()> {
     if args.n == 0 {
         bail!("--n must be at least 1");
     }
-    let run = store::joint::load(&args.ckpt).map_err(super::store_error)?;
+    let (run, _) = store::joint::load_deployed(&args.ckpt).map_err(super::store_error)?;
     // Both planners plan for the spec the network trained on (goal and safe margins).
     let task = run.plan.task();
     let spec = task.spec();

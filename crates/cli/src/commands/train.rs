@@ -167,6 +167,12 @@ pub struct TrainArgs {
     /// Iterations between checkpoints [default: 50].
     #[arg(long)]
     save_every: Option<usize>,
+    /// Validate the deployed pair (mean plans, mean actions) on 100 runs of its own
+    /// every N iterations, and at the first and last; the best validated checkpoint,
+    /// kept in DIR/best, is what the evaluation and `schrl eval` use; 0: the last
+    /// checkpoint [default: 0].
+    #[arg(long, value_name = "N")]
+    select_every: Option<usize>,
 }
 
 impl TrainArgs {
@@ -234,6 +240,7 @@ impl TrainArgs {
         p.guide |= self.pretrain_guide;
         set(&mut s.eval_groups, self.eval_groups);
         set(&mut s.save_every, self.save_every);
+        set(&mut s.select_every, self.select_every);
         s.validate().map_err(flag_error)?;
         Ok(s)
     }
@@ -332,6 +339,7 @@ impl TrainArgs {
                     }),
                 ),
                 ("--obstacle-sdf", self.obstacle_sdf_differs(saved)?),
+                ("--select-every", differs(&self.select_every, &saved.select_every)),
             ],
         )
     }
@@ -529,6 +537,9 @@ pub fn train(args: TrainArgs) -> Result<()> {
         trained.seconds,
         out.display()
     );
+    if let Some(v) = &trained.selected {
+        println!("{}", deployed(v));
+    }
     if let Some(eval) = &trained.evaluation {
         if let Some(png) = trained.pictures.last() {
             println!("wrote {}", png.display());
@@ -551,6 +562,14 @@ fn train_error(e: TrainError) -> anyhow::Error {
     }
 }
 
+/// Which checkpoint a selecting run deploys, as `schrl train` and `schrl eval` say it.
+fn deployed(v: &schrl::run::select::Validation) -> String {
+    format!(
+        "deployed: the checkpoint of iteration {} ({} joint steps), validated at satisfaction {:.3}",
+        v.iteration, v.env_steps, v.satisfaction
+    )
+}
+
 pub(crate) fn print_eval(e: &TaskEval) {
     let (sm, ss) = mean_std(&e.satisfaction);
     println!("satisfaction: {sm:.3} ± {ss:.3}");
@@ -571,7 +590,10 @@ pub fn eval(args: EvalArgs) -> Result<()> {
     if args.groups == 0 || args.per_group == 0 {
         bail!("--groups and --per-group must be at least 1");
     }
-    let t = store::joint::load(&args.ckpt).map_err(super::store_error)?;
+    let (t, selected) = store::joint::load_deployed(&args.ckpt).map_err(super::store_error)?;
+    if let Some(v) = &selected {
+        println!("{}", deployed(v));
+    }
     if args.sampled_plans && args.planner != PlannerChoice::Network {
         bail!("--sampled-plans samples the network's plans; it goes with --planner network only");
     }

@@ -242,6 +242,11 @@ pub struct JointRunSettings {
     pub eval_groups: usize,
     /// Iterations between checkpoints (50).
     pub save_every: usize,
+    /// Iterations between validations of the deployed pair; the best validated
+    /// checkpoint is the run's result ([`crate::run::select`]). 0 (the default, and
+    /// runs saved before it existed): the last checkpoint is.
+    #[serde(default)]
+    pub select_every: usize,
 }
 
 /// Joint-training steps of a run by default.
@@ -305,6 +310,7 @@ impl JointRunSettings {
             pretrain: crate::plan::pretrain::PretrainConfig::default(),
             eval_groups: crate::run::evaluate::EVAL_GROUPS,
             save_every: DEFAULT_SAVE_EVERY,
+            select_every: 0,
         })
     }
 

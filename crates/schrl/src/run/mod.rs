@@ -5,11 +5,13 @@
 //! * [`episode`] — the one episode loop, driving robots through their waypoints.
 //! * [`joint`] — joint training of planner and controller.
 //! * [`evaluate`] — tasks and controllers measured on fresh runs.
+//! * [`select`] — which checkpoint of a joint run is deployed, by validation.
 
 pub mod episode;
 pub mod evaluate;
 pub mod execute;
 pub mod joint;
+pub mod select;
 
 /// A problem running plans with a controller, naming its source.
 #[derive(Debug, thiserror::Error)]

@@ -5,6 +5,11 @@
 //! the planner's optimiser and random stream, the joint loop's random stream, reward
 //! scaler and partial rollout, and the counters; with a trust region, the warm-start
 //! planner it holds to (`anchor.safetensors`). Together they resume a run exactly.
+//!
+//! A run that selects its deployed checkpoint by validation ([`crate::run::select`])
+//! also saves `selection.json` (every validation so far and the best) with each
+//! checkpoint, and keeps the best validated checkpoint as a joint run of its own in
+//! `best/` ([`BEST`]), replaced atomically when a better one is validated.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -19,10 +24,14 @@ use crate::control::normalize::RewardScaler;
 use crate::control::ppo::RolloutBuffer;
 use crate::plan::cpg::{CpgConfig, PlanTrainerState};
 use crate::run::joint::{JointConfig, JointTrainer};
+use crate::run::select::{Selection, Validation};
 use crate::task::Task;
 
 const STATE: &str = "joint.json";
 const ANCHOR: &str = "anchor.safetensors";
+const SELECTION: &str = "selection.json";
+/// The subdirectory of a selecting run holding its best validated checkpoint.
+pub const BEST: &str = "best";
 
 /// The layout of `joint.json` this build writes and reads (files written before the
 /// field existed are this layout).
@@ -121,4 +130,34 @@ pub fn load_from(ckpt: &Checkpoint) -> Result<JointTrainer, StoreError> {
 /// Loads the joint run in `dir`.
 pub fn load(dir: &Path) -> Result<JointTrainer, StoreError> {
     load_from(&Checkpoint::open(dir, RunKind::Joint)?)
+}
+
+/// Writes a selecting run's validations into a save.
+pub fn save_selection(files: &mut SaveFiles, selection: &Selection) -> Result<(), StoreError> {
+    files.json(SELECTION, selection)
+}
+
+/// The validations saved in `ckpt`; `None` for a run that does not select (or has
+/// not validated yet).
+pub fn load_selection(ckpt: &Checkpoint) -> Result<Option<Selection>, StoreError> {
+    if !ckpt.manifest().files.contains_key(SELECTION) {
+        return Ok(None);
+    }
+    ckpt.json(SELECTION).map(Some)
+}
+
+/// The checkpoint of the run in `dir` that is its result: for a run that selects,
+/// the best validated one (in `DIR/best`) with the validation that chose it;
+/// otherwise the last.
+pub fn load_deployed(dir: &Path) -> Result<(JointTrainer, Option<Validation>), StoreError> {
+    let ckpt = Checkpoint::open(dir, RunKind::Joint)?;
+    let best = dir.join(BEST);
+    if let Some(selection) = load_selection(&ckpt)?
+        && best.join(super::MANIFEST).exists()
+    {
+        let t = load(&best)?;
+        let chosen = selection.validations.iter().find(|v| v.iteration == t.iterations).copied();
+        return Ok((t, chosen));
+    }
+    Ok((load_from(&ckpt)?, None))
 }

@@ -1,0 +1,144 @@
+//! Choosing which checkpoint of a joint run to deploy, by validation.
+//!
+//! The joint phase trains on sampled plans and sampled actions; what is deployed and
+//! evaluated is the mean plans driven with mean actions. The two need not move
+//! together (on Doggo Cover seed 0 the final pair satisfied less than the warm-start
+//! pair; README, *Selecting the deployed checkpoint*). With selection on, the deployed pair is
+//! measured every few iterations on [`SELECT_RUNS`] runs of its own, and the best
+//! measured checkpoint is the one `schrl eval` and the run's own evaluation use.
+//!
+//! *Held apart from the evaluation.* Validation runs start from [`SELECT_SEED`]'s
+//! stream, never [`super::evaluate::EVAL_SEED`]'s, so choosing a checkpoint does not
+//! look at the runs it is then judged on.
+//!
+//! *Order.* A validation is better than another when it satisfies more runs; at equal
+//! satisfaction, when its satisfying runs reach the task's last goal in fewer steps; at
+//! a tie on both, the earlier one stays (it trained less to get there).
+//!
+//! *Cost.* One validation is [`SELECT_RUNS`] executed runs, the work of one evaluation
+//! group; a run validates at its first iteration (the warm-start pair), every
+//! `select_every` iterations and at its end.
+
+use serde::{Deserialize, Serialize};
+
+use super::RunError;
+use super::evaluate::{Plans, evaluate_task, mean_std};
+use super::joint::JointTrainer;
+
+/// Seed of the validation runs' starts and plans (not the evaluation's 2024).
+pub const SELECT_SEED: u64 = 7;
+/// Runs per validation: one evaluation group.
+pub const SELECT_RUNS: usize = super::evaluate::EVAL_PER_GROUP;
+
+/// One validation of the deployed pair (mean plans, mean actions).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Validation {
+    /// Joint iterations done when it was measured (0: the warm-start pair).
+    pub iteration: usize,
+    /// Joint environment steps done then.
+    pub env_steps: usize,
+    /// Fraction of the [`SELECT_RUNS`] runs satisfying the task.
+    pub satisfaction: f64,
+    /// Mean steps to reach of the satisfying runs (`None` when none satisfied).
+    pub steps_to_reach: Option<f64>,
+}
+
+impl Validation {
+    /// Validates `t`'s deployed pair now.
+    pub fn of(t: &JointTrainer) -> Result<Self, RunError> {
+        let eval = evaluate_task(
+            &t.task,
+            Plans::Mean(t.plan.planner()),
+            &t.control.controller(),
+            (1, SELECT_RUNS),
+            SELECT_SEED,
+        )?;
+        Ok(Self {
+            iteration: t.iterations,
+            env_steps: t.env_steps,
+            satisfaction: mean_std(&eval.satisfaction).0,
+            steps_to_reach: (!eval.steps_to_reach.is_empty()).then(|| mean_std(&eval.steps_to_reach).0),
+        })
+    }
+
+    /// Whether `self` beats `other` (see the module's *Order*).
+    pub fn beats(&self, other: &Validation) -> bool {
+        if self.satisfaction != other.satisfaction {
+            return self.satisfaction > other.satisfaction;
+        }
+        match (self.steps_to_reach, other.steps_to_reach) {
+            (Some(a), Some(b)) => a < b,
+            _ => false,
+        }
+    }
+}
+
+/// Every validation of a run so far and which one is deployed; saved with each
+/// checkpoint, so a resumed run goes on choosing as the uninterrupted one would.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Selection {
+    /// The validations, in order.
+    pub validations: Vec<Validation>,
+    /// Index into `validations` of the best one.
+    pub best: Option<usize>,
+}
+
+impl Selection {
+    /// Whether the pair at `iteration` is to be validated, with validations every
+    /// `every` iterations (`last`: the run's final iteration): at the first, every
+    /// `every`th and the last iteration, once each.
+    pub fn due(&self, iteration: usize, every: usize, last: bool) -> bool {
+        let done = self.validations.last().is_some_and(|v| v.iteration == iteration);
+        every > 0 && !done && (iteration.is_multiple_of(every) || last)
+    }
+
+    /// Records `v`; `true` when it is the new best.
+    pub fn record(&mut self, v: Validation) -> bool {
+        let better = self.best().is_none_or(|b| v.beats(b));
+        self.validations.push(v);
+        if better {
+            self.best = Some(self.validations.len() - 1);
+        }
+        better
+    }
+
+    /// The best validation so far.
+    pub fn best(&self) -> Option<&Validation> {
+        self.best.and_then(|i| self.validations.get(i))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn v(iteration: usize, satisfaction: f64, steps: Option<f64>) -> Validation {
+        Validation { iteration, env_steps: iteration * 100, satisfaction, steps_to_reach: steps }
+    }
+
+    #[test]
+    fn more_satisfaction_wins_then_fewer_steps_and_a_tie_keeps_the_earlier() {
+        let mut s = Selection::default();
+        assert!(s.record(v(0, 0.90, Some(400.0))), "the first validation is the best so far");
+        assert!(!s.record(v(10, 0.80, Some(300.0))), "faster but satisfying less");
+        assert!(s.record(v(20, 0.90, Some(380.0))), "as satisfying and faster");
+        assert!(!s.record(v(30, 0.90, Some(380.0))), "a tie keeps the earlier");
+        assert!(s.record(v(40, 0.95, Some(500.0))), "more satisfying though slower");
+        assert!(!s.record(v(50, 0.0, None)));
+        assert_eq!(s.best().map(|b| b.iteration), Some(40));
+    }
+
+    #[test]
+    fn validations_fall_on_the_first_every_nth_and_last_iteration_once_each() {
+        let mut s = Selection::default();
+        assert!(s.due(0, 5, false), "the warm-start pair");
+        assert!(!s.due(3, 5, false));
+        assert!(s.due(5, 5, false));
+        assert!(s.due(7, 5, true), "the run's last iteration");
+        s.record(v(7, 0.5, None));
+        assert!(!s.due(7, 5, true), "once: a resumed run that validated before saving");
+        assert!(!s.due(0, 0, true), "every 0: selection off");
+    }
+}
