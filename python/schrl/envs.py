@@ -98,6 +98,11 @@ class RobotEnv(gym.Env):
         return np.array(self._native.goal_origin)
 
     @property
+    def observe_track(self):
+        """Whether observations end with the robot's offset from its track."""
+        return bool(self._native.observe_track)
+
+    @property
     def position(self):
         """The robot's position (x, y; x, y, z for the Drone)."""
         return np.array(self._native.position)

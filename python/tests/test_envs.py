@@ -86,6 +86,7 @@ def test_starts_and_goals_can_be_set_and_driving_at_the_goal_reaches_it():
 def test_the_track_offset_points_from_the_robot_to_its_segment_in_its_own_frame(robot):
     plain, tracked = RobotEnv(robot), RobotEnv(robot, observe_track=True)
     dim = len(tracked.position)
+    assert tracked.observe_track and not plain.observe_track
     assert tracked.observation_space.shape[0] == plain.observation_space.shape[0] + dim
     check_env(tracked, skip_render_check=True)
     start = [0.0, 0.0, 1.0][:dim]

@@ -107,6 +107,7 @@ impl ControlConfig {
     /// Defaults for `robot`: its open map, the reference PPO preset, and a step
     /// budget that reaches ≥ 95 % success (measured; see the README's results).
     pub fn for_robot(robot: Robot) -> Self {
+        let track = TrackDefaults::for_robot(robot);
         Self {
             robot,
             map: open_map(robot).name().to_string(),
@@ -117,8 +118,8 @@ impl ControlConfig {
             goal: None,
             near_goals: None,
             fall_penalty: 0.0,
-            off_track_weight: TrackDefaults::for_robot(robot).off_track_weight,
-            observe_track: TrackDefaults::for_robot(robot).observe,
+            off_track_weight: track.off_track_weight,
+            observe_track: track.observe,
         }
     }
 }
