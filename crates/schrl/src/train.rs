@@ -8,7 +8,8 @@
 //! the end, one metrics line per iteration) until the step budget or the target, then
 //! the training curve and, with `eval_groups > 0`, the evaluation of the mean plans
 //! with its picture. A run with `select_every > 0` validates its deployed pair at the
-//! first iteration, every `select_every` iterations and the last, and its result (the
+//! first iteration, after every `select_every` environment steps and at the last, and
+//! its result (the
 //! evaluation, `schrl eval`) is the best validated checkpoint ([`crate::run::select`]).
 //!
 //! A caller watches through a [`Watcher`]: progress of each stage, notes worth a
@@ -324,7 +325,7 @@ fn save(run: &mut RunWriter, trainer: &JointTrainer, selector: &Option<Selector>
 
 /// A selecting run's validations and its best checkpoint's directory.
 struct Selector {
-    /// Iterations between validations.
+    /// Environment steps between validations.
     every: usize,
     selection: Selection,
     /// `DIR/best`.
@@ -344,7 +345,7 @@ impl Selector {
         settings: &JointRunSettings,
         watcher: &mut dyn Watcher,
     ) -> Result<(), TrainError> {
-        if !self.selection.due(t.iterations, self.every, last) {
+        if !self.selection.due(t.env_steps, self.every, last) {
             return Ok(());
         }
         let v = Validation::of(t)?;

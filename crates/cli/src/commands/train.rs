@@ -168,10 +168,10 @@ pub struct TrainArgs {
     #[arg(long)]
     save_every: Option<usize>,
     /// Validate the deployed pair (mean plans, mean actions) on 100 runs of its own
-    /// every N iterations, and at the first and last; the best validated checkpoint,
-    /// kept in DIR/best, is what the evaluation and `schrl eval` use; 0: the last
-    /// checkpoint [default: 0].
-    #[arg(long, value_name = "N")]
+    /// after every STEPS joint environment steps, and at the first and last iteration;
+    /// the best validated checkpoint, kept in DIR/best, is what the evaluation and
+    /// `schrl eval` use; 0: the last checkpoint [default: 0].
+    #[arg(long, value_name = "STEPS")]
     select_every: Option<usize>,
 }
 

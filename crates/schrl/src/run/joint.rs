@@ -242,9 +242,9 @@ pub struct JointRunSettings {
     pub eval_groups: usize,
     /// Iterations between checkpoints (50).
     pub save_every: usize,
-    /// Iterations between validations of the deployed pair; the best validated
-    /// checkpoint is the run's result ([`crate::run::select`]). 0 (the default, and
-    /// runs saved before it existed): the last checkpoint is.
+    /// Joint environment steps between validations of the deployed pair; the best
+    /// validated checkpoint is the run's result ([`crate::run::select`]). 0 (the
+    /// default, and runs saved before it existed): the last checkpoint is.
     #[serde(default)]
     pub select_every: usize,
 }

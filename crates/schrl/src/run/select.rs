@@ -15,9 +15,11 @@
 //! satisfaction, when its satisfying runs reach the task's last goal in fewer steps; at
 //! a tie on both, the earlier one stays (it trained less to get there).
 //!
-//! *Cost.* One validation is [`SELECT_RUNS`] executed runs, the work of one evaluation
-//! group; a run validates at its first iteration (the warm-start pair), every
-//! `select_every` iterations and at its end.
+//! *When.* At the first iteration (the warm-start pair), at the first iteration after
+//! each `select_every` more environment steps, and at the last: counted in steps, not
+//! iterations, so tasks whose iterations differ tenfold in length (Doggo Cover about
+//! 2 300 steps, Loop about 11 000) validate equally often. One validation is
+//! [`SELECT_RUNS`] executed runs, the work of one evaluation group.
 
 use serde::{Deserialize, Serialize};
 
@@ -86,12 +88,19 @@ pub struct Selection {
 }
 
 impl Selection {
-    /// Whether the pair at `iteration` is to be validated, with validations every
-    /// `every` iterations (`last`: the run's final iteration): at the first, every
-    /// `every`th and the last iteration, once each.
-    pub fn due(&self, iteration: usize, every: usize, last: bool) -> bool {
-        let done = self.validations.last().is_some_and(|v| v.iteration == iteration);
-        every > 0 && !done && (iteration.is_multiple_of(every) || last)
+    /// Whether the pair after `env_steps` joint steps is to be validated, with
+    /// validations every `every` steps (`last`: the run's final iteration): at the
+    /// first iteration, the first after each multiple of `every`, and the last, once
+    /// each; never with `every` 0.
+    pub fn due(&self, env_steps: usize, every: usize, last: bool) -> bool {
+        if every == 0 {
+            return false;
+        }
+        match self.validations.last() {
+            None => true,
+            Some(v) if v.env_steps == env_steps => false,
+            Some(v) => last || env_steps / every > v.env_steps / every,
+        }
     }
 
     /// Records `v`; `true` when it is the new best.
@@ -131,14 +140,18 @@ mod tests {
     }
 
     #[test]
-    fn validations_fall_on_the_first_every_nth_and_last_iteration_once_each() {
+    fn validations_fall_on_the_first_iteration_each_crossing_and_the_last_once_each() {
         let mut s = Selection::default();
-        assert!(s.due(0, 5, false), "the warm-start pair");
-        assert!(!s.due(3, 5, false));
-        assert!(s.due(5, 5, false));
-        assert!(s.due(7, 5, true), "the run's last iteration");
-        s.record(v(7, 0.5, None));
-        assert!(!s.due(7, 5, true), "once: a resumed run that validated before saving");
-        assert!(!s.due(0, 0, true), "every 0: selection off");
+        assert!(s.due(0, 1000, false), "the warm-start pair");
+        s.record(v(0, 0.5, None));
+        assert!(!s.due(0, 1000, false), "once");
+        assert!(!s.due(900, 1000, false));
+        assert!(s.due(1100, 1000, false), "the first iteration past 1000 steps");
+        s.record(v(11, 0.5, None));
+        assert!(!s.due(1900, 1000, false));
+        assert!(s.due(1950, 1000, true), "the run's last iteration");
+        s.record(Validation { env_steps: 1950, ..v(19, 0.5, None) });
+        assert!(!s.due(1950, 1000, true), "once: a resumed run that validated before saving");
+        assert!(!Selection::default().due(0, 0, true), "every 0: selection off");
     }
 }
