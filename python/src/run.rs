@@ -14,8 +14,11 @@ use schrl::run::evaluate::{
 };
 use schrl::run::joint::{JointTrainer, paths_of};
 
+/// The run's deployed checkpoint (the best validated one of a run that selects).
 fn load(ckpt: &Path) -> PyResult<JointTrainer> {
-    schrl::store::joint::load(ckpt).map_err(|e| PyValueError::new_err(format!("{}: {e}", ckpt.display())))
+    schrl::store::joint::load_deployed(ckpt)
+        .map(|(t, _)| t)
+        .map_err(|e| PyValueError::new_err(format!("{}: {e}", ckpt.display())))
 }
 
 fn runtime(e: impl std::fmt::Display) -> PyErr {

@@ -247,7 +247,9 @@ fn metrics_dict<'py>(py: Python<'py>, m: &JointMetrics) -> PyResult<Bound<'py, P
 ///
 /// Returns a dict: `out`, `iterations`, `env_steps`, `seconds`, `stop` ("steps" or
 /// "target"), `history` (one dict per joint iteration), `evaluation` (as
-/// `schrl.evaluate` returns, or None) and `pictures` (paths).
+/// `schrl.evaluate` returns, or None), `pictures` (paths) and `selected` (with
+/// `select_every`: the deployed checkpoint's `iteration`, `env_steps`,
+/// `satisfaction` and `steps_to_reach` as validated; else None).
 #[pyfunction]
 #[pyo3(signature = (task = None, *, out, robot = None, seed = None, force = false, resume = false, progress = None, **settings))]
 #[allow(clippy::too_many_arguments)]
@@ -340,6 +342,18 @@ fn train<'py>(
     let evaluation = trained.evaluation.as_ref().map(|e| crate::run::evaluation_dict(py, e)).transpose()?;
     d.set_item("evaluation", evaluation)?;
     d.set_item("pictures", trained.pictures)?;
+    let selected = match &trained.selected {
+        Some(v) => {
+            let s = PyDict::new(py);
+            s.set_item("iteration", v.iteration)?;
+            s.set_item("env_steps", v.env_steps)?;
+            s.set_item("satisfaction", v.satisfaction)?;
+            s.set_item("steps_to_reach", v.steps_to_reach)?;
+            Some(s)
+        }
+        None => None,
+    };
+    d.set_item("selected", selected)?;
     Ok(d)
 }
 

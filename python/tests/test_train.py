@@ -46,6 +46,17 @@ def test_evaluation_after_training_is_schrl_evaluate(general, tmp_path):
     assert [os.path.basename(p) for p in result["pictures"]] == ["training_curve.png", "episodes.png"]
 
 
+def test_a_selecting_run_deploys_its_best_validated_checkpoint(general, tmp_path):
+    result = train(tmp_path / "run", general, eval_groups=1, select_every=max(1, TINY["steps"] // 2))
+    chosen = result["selected"]
+    assert chosen is not None and 0 <= chosen["iteration"] <= result["iterations"]
+    assert 0 <= chosen["satisfaction"] <= 1
+    assert (tmp_path / "run" / "best" / "manifest.json").exists()
+    # What the run evaluated is what schrl.evaluate loads: the deployed checkpoint.
+    assert result["evaluation"] == schrl.evaluate(str(tmp_path / "run"), groups=1)
+    assert train(tmp_path / "plain", general)["selected"] is None
+
+
 def test_existing_runs_are_refused_resumed_or_replaced(general, tmp_path):
     out = tmp_path / "run"
     first = train(out, general)
