@@ -136,7 +136,8 @@ fn table1_runs_doggo_at_quick_size() {
     assert!(r["rows"]["schrl"]["satisfaction"].is_number(), "{r}");
     assert!(out.join("table1.png").exists());
     // The Doggo's defaults: its controller observes and pays for its track, and so
-    // does the joint phase (README, *The track in the controller's observation*).
+    // does the joint phase (README, *The track in the controller's observation*); the
+    // run deploys its best validated checkpoint (*Selecting the deployed checkpoint*).
     let manifests = manifests_under(out);
     let kind = |k: &str| manifests.iter().filter(move |m| m["kind"] == k).collect::<Vec<_>>();
     assert!(!kind("controller").is_empty() && !kind("joint").is_empty(), "{manifests:?}");
@@ -146,6 +147,7 @@ fn table1_runs_doggo_at_quick_size() {
     }
     for m in kind("joint") {
         assert_eq!(m["settings"]["joint"]["off_track_weight"], 0.1, "{m}");
+        assert_eq!(m["settings"]["select_every"], 250_000, "{m}");
     }
 }
 

@@ -550,6 +550,7 @@ mod tests {
         s.validate().unwrap();
         assert_eq!((s.seed, s.cpg.seed), (3, 3));
         assert!(s.joint.goal_margin > 0.0, "the planner's goals shrink by the reach radius");
+        assert_eq!(s.select_every, 0, "Point's runs deploy their last checkpoint");
     }
 
     #[test]

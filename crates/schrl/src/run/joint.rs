@@ -243,8 +243,9 @@ pub struct JointRunSettings {
     /// Iterations between checkpoints (50).
     pub save_every: usize,
     /// Joint environment steps between validations of the deployed pair; the best
-    /// validated checkpoint is the run's result ([`crate::run::select`]). 0 (the
-    /// default, and runs saved before it existed): the last checkpoint is.
+    /// validated checkpoint is the run's result ([`crate::run::select`]). 0 (runs
+    /// saved before it existed, and the native robots' default): the last checkpoint
+    /// is. Default: [`crate::run::select::default_every`].
     #[serde(default)]
     pub select_every: usize,
 }
@@ -288,7 +289,7 @@ impl SettingError {
 impl JointRunSettings {
     /// The default settings of a run of `task` from `seed`: the planner's goal discs
     /// shrunk by the robot's reach radius, [`DEFAULT_SAFE_MARGIN`] more clearance, the
-    /// robot's off-track weight, and each config's own defaults.
+    /// robot's off-track weight and validation interval, and each config's own defaults.
     pub fn for_task(task: &Task, seed: u64) -> Result<Self, RunError> {
         let goal_margin = sim::make_env(task.robot, task.map.clone())?.reach_radius();
         Ok(Self {
@@ -310,7 +311,7 @@ impl JointRunSettings {
             pretrain: crate::plan::pretrain::PretrainConfig::default(),
             eval_groups: crate::run::evaluate::EVAL_GROUPS,
             save_every: DEFAULT_SAVE_EVERY,
-            select_every: 0,
+            select_every: crate::run::select::default_every(task.robot),
         })
     }
 

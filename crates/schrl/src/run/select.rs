@@ -32,6 +32,18 @@ pub const SELECT_SEED: u64 = 7;
 /// Runs per validation: one evaluation group.
 pub const SELECT_RUNS: usize = super::evaluate::EVAL_PER_GROUP;
 
+/// Joint environment steps between validations by default for `robot`: the Doggo's
+/// 250 000 (about twelve validations in its 3 M steps, chosen on its tuning seed 0,
+/// README *Selecting the deployed checkpoint*); 0 (the last checkpoint) for the
+/// native robots, whose runs were measured without selection and have not been
+/// re-derived with it.
+pub fn default_every(robot: sim::Robot) -> usize {
+    match robot {
+        sim::Robot::Doggo => 250_000,
+        sim::Robot::Point | sim::Robot::Car | sim::Robot::Drone => 0,
+    }
+}
+
 /// One validation of the deployed pair (mean plans, mean actions).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
