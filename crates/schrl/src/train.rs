@@ -9,8 +9,8 @@
 //! the training curve and, with `eval_groups > 0`, the evaluation of the mean plans
 //! with its picture. A run with `select_every > 0` validates its deployed pair at the
 //! first iteration, after every `select_every` environment steps and at the last, and
-//! its result (the
-//! evaluation, `schrl eval`) is the best validated checkpoint ([`crate::run::select`]).
+//! its result (the evaluation, `schrl eval`) is the best validated checkpoint
+//! ([`crate::run::select`]).
 //!
 //! A caller watches through a [`Watcher`]: progress of each stage, notes worth a
 //! user's eye, and whether to stop (Ctrl-C): a stopped run saves its checkpoint first,
@@ -137,7 +137,7 @@ pub struct Trained {
     /// The pictures written: the training curve, then the evaluation's runs.
     pub pictures: Vec<PathBuf>,
     /// For a run that selects, the validation of the checkpoint deployed (and
-    /// evaluated); `None` otherwise or when stopped.
+    /// evaluated); `None` otherwise.
     pub selected: Option<Validation>,
 }
 
@@ -282,14 +282,13 @@ impl RunSession {
         let seconds = start.elapsed().as_secs_f64();
         let selected = selector.as_ref().and_then(|sel| sel.selection.best().copied());
         let mut trained =
-            Trained { trainer, history, stop, seconds, evaluation: None, pictures: vec![], selected: None };
+            Trained { trainer, history, stop, seconds, evaluation: None, pictures: vec![], selected };
         if stop == Stop::Requested {
             return Ok(trained);
         }
         let curve = self.run.dir().join("training_curve.png");
         save_curve(&trained.history, &curve)?;
         trained.pictures.push(curve);
-        trained.selected = selected;
         if s.eval_groups > 0 {
             let best = match &selector {
                 Some(sel) => Some(store::joint::load(&sel.dir)?),
