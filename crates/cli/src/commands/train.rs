@@ -170,8 +170,8 @@ pub struct TrainArgs {
     /// Validate the deployed pair (mean plans, mean actions) on 100 runs of its own
     /// after every STEPS joint environment steps, and at the first and last iteration;
     /// the best validated checkpoint, kept in DIR/best, is what the evaluation and
-    /// `schrl eval` use; 0: the last checkpoint [default: 250000 for the Doggo, 0 for
-    /// the others].
+    /// `schrl eval` use; 0: the last checkpoint [default: 250000 for the Doggo and the
+    /// Car, 0 for Point and the Drone].
     #[arg(long, value_name = "STEPS")]
     select_every: Option<usize>,
 }
