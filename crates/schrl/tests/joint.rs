@@ -537,3 +537,18 @@ fn anchor_penalties_have_their_gradients_and_the_length_one_is_one_sided() {
     assert!(pen == 0.0 && ascent.iter().all(|g| *g == 0.0) && dist > 0.5);
     assert!(AnchorKind::Paths.penalty(w, &straight, &anchored, steps, dim, &mut ascent).0 > 0.0);
 }
+
+/// Each robot's defaults, re-derived on its own tuning seeds (README, *Car and Drone*):
+/// the Car trains 4.5 M joint steps and deploys its best validated checkpoint; Point
+/// and the Drone train 3 M and deploy their last.
+#[test]
+fn the_car_trains_longer_and_selects_by_default() {
+    use schrl::run::joint::{DEFAULT_STEPS, JointRunSettings};
+    for (robot, steps, every) in
+        [(Robot::Point, DEFAULT_STEPS, 0), (Robot::Car, 4_500_000, 250_000), (Robot::Drone, DEFAULT_STEPS, 0)]
+    {
+        let task = Task::builtin(robot.name(), TaskKind::Seq).unwrap();
+        let s = JointRunSettings::for_task(&task, 0).unwrap();
+        assert_eq!((s.steps, s.select_every), (steps, every), "{robot:?}");
+    }
+}

@@ -34,7 +34,7 @@ pub struct TrainArgs {
     /// Seed of everything [default: 0].
     #[arg(long)]
     seed: Option<u64>,
-    /// Environment steps of joint training [default: 3000000].
+    /// Environment steps of joint training [default: 3000000; the Car's 4500000].
     #[arg(long)]
     steps: Option<usize>,
     /// Stop early once this fraction of the last 20 iterations' runs satisfy the task
