@@ -263,6 +263,7 @@ pub fn default_steps(robot: sim::Robot) -> usize {
         sim::Robot::Point | sim::Robot::Drone | sim::Robot::Doggo => DEFAULT_STEPS,
     }
 }
+
 /// Iterations between checkpoints by default.
 pub const DEFAULT_SAVE_EVERY: usize = 50;
 /// The planner's extra clearance by default: one Point radius (README, *Joint training
