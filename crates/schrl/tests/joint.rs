@@ -7,7 +7,7 @@ use schrl::run::evaluate::mean_std;
 use schrl::run::execute::{Dispatch, Execution, Outcome, WaypointDispatcher};
 use schrl::run::joint::{JointConfig, JointTrainer};
 use schrl::task::along::ExecutionSpec;
-use schrl::task::{Follow, Task, TaskKind};
+use schrl::task::{Follow, Reach, Task, TaskKind};
 use sim::{Robot, Step};
 
 fn step(reached: bool, collided: bool) -> Step {
@@ -47,6 +47,33 @@ fn dispatcher_stops_when_the_robot_falls() {
     assert!(fell.terminated());
     assert_eq!(d.after_step(&fell, &[0.2, 0.0]), Dispatch::Done(Outcome::Fell));
     assert_eq!(d.outcome(), Some(Outcome::Fell));
+}
+
+#[test]
+fn reaching_in_goal_waits_until_the_robot_is_inside_the_waypoints_goal() {
+    // Doggo Seq: 0.3 m goals, the first at (2, 2); waypoints reached within 0.2 m.
+    let task = Task::builtin("doggo", TaskKind::Seq).unwrap();
+    let wps = vec![vec![2.25, 2.0], vec![0.0, 0.0]];
+    assert_eq!(task.goals_holding(&wps[0]).len(), 1);
+    assert!(task.goals_holding(&wps[1]).is_empty());
+    let mut d = WaypointDispatcher::new(vec![3.0, 2.0], wps.clone(), 100).reaching_in_goals(0.2, &task);
+    // Within the radius, outside the goal (0.4 m from its centre): the run keeps
+    // driving to the same waypoint, whatever the environment says.
+    assert_eq!(d.after_step(&step(true, false), &[2.4, 2.0]), Dispatch::Continue);
+    assert_eq!(d.current(), Some(&wps[0][..]));
+    // Inside the goal but beyond the radius: still not reached.
+    assert_eq!(d.after_step(&step(false, false), &[1.8, 2.0]), Dispatch::Continue);
+    // Both: reached, though the environment (which reaches a goal once) says no.
+    assert_eq!(d.after_step(&step(false, false), &[2.1, 2.0]), Dispatch::NewGoal(vec![0.0, 0.0]));
+    // A waypoint in no goal is reached by the radius alone.
+    assert_eq!(d.after_step(&step(false, false), &[0.1, 0.1]), Dispatch::Done(Outcome::Completed));
+    assert_eq!(d.executed_path(), &[vec![3.0, 2.0], vec![2.1, 2.0], vec![0.1, 0.1]]);
+    assert_eq!(d.reached_at(), &[3, 4]);
+
+    // The paper's rule counts the first of those positions, outside the goal.
+    let mut d = WaypointDispatcher::new(vec![3.0, 2.0], wps, 100);
+    assert_eq!(d.after_step(&step(true, false), &[2.4, 2.0]), Dispatch::NewGoal(vec![0.0, 0.0]));
+    assert_eq!(Reach::default(), Reach::Radius);
 }
 
 #[test]

@@ -13,8 +13,8 @@ use schrl::run::evaluate::{
 };
 use schrl::run::joint::{JointRunSettings, SettingError};
 use schrl::store::{self, JsonLines, RunKind};
-use schrl::task::Follow;
 use schrl::task::neural_sdf::{NeuralSdf, SdfFitConfig};
+use schrl::task::{Follow, Reach};
 use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watcher};
 use sim::Robot;
 use stl::Semantics;
@@ -112,6 +112,11 @@ pub struct TrainArgs {
     /// planned segment, never past its waypoint) [default: waypoints].
     #[arg(long, value_name = "waypoints|carrot:METRES")]
     follow: Option<Follow>,
+    /// When the executing robot counts a waypoint reached: radius (within the reach
+    /// radius, the paper's) or in-goal (within it and inside every goal that holds
+    /// the planned waypoint) [default: radius].
+    #[arg(long, value_name = "radius|in-goal")]
+    reach: Option<Reach>,
     /// Reward the joint phase's controller loses per step per metre it strays from the
     /// planned segment it drives (0: the paper's reward) [default: 0.1 for the Doggo, 0
     /// for the others].
@@ -217,6 +222,7 @@ impl TrainArgs {
         set(&mut j.control_lr, self.control_lr.map(Some));
         set(&mut j.control_target_kl, self.control_target_kl.map(Some));
         set(&mut j.follow, self.follow);
+        set(&mut j.reach, self.reach);
         set(&mut j.off_track_weight, self.off_track_weight);
         set(&mut j.length_weight, self.length_weight);
         j.freeze_planner = self.freeze_planner;
@@ -324,6 +330,7 @@ impl TrainArgs {
                     differs(&self.control_target_kl.map(Some), &saved.joint.control_target_kl),
                 ),
                 ("--follow", differs(&self.follow, &saved.joint.follow)),
+                ("--reach", differs(&self.reach, &saved.joint.reach)),
                 ("--off-track-weight", differs(&self.off_track_weight, &saved.joint.off_track_weight)),
                 ("--length-weight", differs(&self.length_weight, &saved.joint.length_weight)),
                 ("--anchor-weight", differs(&self.anchor_weight, &saved.joint.anchor_weight)),
@@ -418,6 +425,10 @@ pub struct EvalArgs {
     /// carrot:METRES (see `schrl train --follow`) [default: the run's].
     #[arg(long, value_name = "waypoints|carrot:METRES")]
     follow: Option<Follow>,
+    /// When the robot counts a waypoint reached: radius or in-goal (see `schrl train
+    /// --reach`) [default: the run's].
+    #[arg(long, value_name = "radius|in-goal")]
+    reach: Option<Reach>,
 }
 
 /// The planner `schrl eval` executes.
@@ -634,6 +645,9 @@ pub fn eval(args: EvalArgs) -> Result<()> {
         let reach = schrl::run::execute::task_env(task.robot, &task, false)?.reach_radius();
         follow.check(reach).map_err(|e| anyhow::anyhow!("--follow {follow}: {e}"))?;
         task.follow = follow;
+    }
+    if let Some(reach) = args.reach {
+        task.reach = reach;
     }
     let task = &task;
     let sizes = (args.groups, args.per_group);

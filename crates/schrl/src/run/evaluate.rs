@@ -13,7 +13,7 @@ use sim::{Map, VecEnv};
 
 use super::RunError;
 use super::episode::{Episode, MeanActions, drive};
-use super::execute::{Execution, Outcome, WaypointDispatcher, start_run, task_env};
+use super::execute::{Execution, Outcome, WaypointDispatcher, start_task_run, task_env};
 use super::joint::paths_of;
 use crate::control::Controller;
 use crate::plan::gradient_planner::{self, GradientPlannerConfig};
@@ -262,7 +262,7 @@ pub fn evaluate_task_with(
         let mut dispatchers = Vec::with_capacity(paths.len());
         for (i, (env, path)) in envs.iter_mut().zip(&paths).enumerate() {
             let obs = &mut raw[i * od..(i + 1) * od];
-            dispatchers.push(start_run(env.as_mut(), rng.random(), path, task.step_limit, task.follow, obs)?);
+            dispatchers.push(start_task_run(env.as_mut(), rng.random(), path, task, obs)?);
         }
         let episodes =
             drive(&mut envs, dispatchers, task.follow, &mut raw, &mut MeanActions::new(controller))?;

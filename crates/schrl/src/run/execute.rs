@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use sim::{Env, Step};
 
 use crate::task::along::{Entry, ExecutionSpec};
-use crate::task::{Follow, Task};
+use crate::task::{Follow, GoalRegion, Reach, Task};
 
 /// How a run ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -51,6 +51,16 @@ pub struct WaypointDispatcher {
     reached_at: Vec<usize>,
     outcome: Option<Outcome>,
     steps: usize,
+    inside: Option<InsideGoals>,
+}
+
+/// [`Reach::InGoal`]'s rule: a waypoint counts reached within `radius` of it and
+/// inside every goal `goals` lists for it.
+#[derive(Clone, Debug, PartialEq)]
+struct InsideGoals {
+    radius: f64,
+    /// Per waypoint, the goals that hold it ([`Task::goals_holding`]).
+    goals: Vec<Vec<GoalRegion>>,
 }
 
 impl WaypointDispatcher {
@@ -58,7 +68,27 @@ impl WaypointDispatcher {
     /// most `limit` environment steps.
     pub fn new(start: Vec<f64>, waypoints: Vec<Vec<f64>>, limit: usize) -> Self {
         let outcome = waypoints.is_empty().then_some(Outcome::Completed);
-        Self { waypoints, next: 0, limit, reached: vec![start], reached_at: vec![], outcome, steps: 0 }
+        Self {
+            waypoints,
+            next: 0,
+            limit,
+            reached: vec![start],
+            reached_at: vec![],
+            outcome,
+            steps: 0,
+            inside: None,
+        }
+    }
+
+    /// The same run with [`Reach::InGoal`]: a waypoint counts reached only within
+    /// `radius` of it (the environment's reach radius) and strictly inside every goal
+    /// of `task` that holds it. The dispatcher then decides reaching itself; the
+    /// environment's own reach (which pays its bonus, once per goal) no longer
+    /// advances the run, so a robot within the radius but outside the goal keeps
+    /// driving to the same waypoint.
+    pub fn reaching_in_goals(self, radius: f64, task: &Task) -> Self {
+        let goals = self.waypoints.iter().map(|w| task.goals_holding(w)).collect();
+        Self { inside: Some(InsideGoals { radius, goals }), ..self }
     }
 
     /// The waypoint being driven to.
@@ -97,7 +127,15 @@ impl WaypointDispatcher {
             return Dispatch::Done(o);
         }
         self.steps += 1;
-        if step.reached {
+        let reached = match &self.inside {
+            None => step.reached,
+            Some(rule) => {
+                let w = &self.waypoints[self.next];
+                let d2: f64 = w.iter().zip(position).map(|(a, b)| (a - b) * (a - b)).sum();
+                d2.sqrt() <= rule.radius && rule.goals[self.next].iter().all(|g| g.holds(position))
+            }
+        };
+        if reached {
             self.reached.push(position.to_vec());
             self.reached_at.push(self.steps);
             self.next += 1;
@@ -118,7 +156,7 @@ impl WaypointDispatcher {
             self.outcome = Some(Outcome::TimedOut);
             return Dispatch::Done(Outcome::TimedOut);
         }
-        if step.reached { Dispatch::NewGoal(self.waypoints[self.next].clone()) } else { Dispatch::Continue }
+        if reached { Dispatch::NewGoal(self.waypoints[self.next].clone()) } else { Dispatch::Continue }
     }
 
     /// The start and the positions where waypoints were reached, in order.
@@ -274,4 +312,20 @@ pub fn start_run(
     let d = WaypointDispatcher::new(path[0].clone(), path[1..].to_vec(), limit);
     aim(env, &d, follow, obs)?;
     Ok(d)
+}
+
+/// [`start_run`] as `task` executes its plans: its step limit, its [`Follow`] and its
+/// [`Reach`].
+pub fn start_task_run(
+    env: &mut dyn Env,
+    seed: u64,
+    path: &[Vec<f64>],
+    task: &Task,
+    obs: &mut [f64],
+) -> Result<WaypointDispatcher, sim::EnvError> {
+    let d = start_run(env, seed, path, task.step_limit, task.follow, obs)?;
+    Ok(match task.reach {
+        Reach::Radius => d,
+        Reach::InGoal => d.reaching_in_goals(env.reach_radius(), task),
+    })
 }

@@ -34,10 +34,10 @@ use crate::plan::cpg::{AnchorKind, CpgConfig, PathLengthReward, PlanTrainer};
 use crate::run::RunError;
 use crate::run::episode::{Driver, drive};
 use crate::run::evaluate::reach_steps;
-use crate::run::execute::{Execution, Outcome, start_run, task_env};
+use crate::run::execute::{Execution, Outcome, start_task_run, task_env};
 use crate::task::along::ExecutionSpec;
 use crate::task::neural_sdf::NeuralSdf;
-use crate::task::{Follow, ObstacleModel, Task};
+use crate::task::{Follow, ObstacleModel, Reach, Task};
 
 /// Joint-training settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -147,6 +147,11 @@ pub struct JointConfig {
     /// planned segments*).
     #[serde(default)]
     pub off_track_weight: f64,
+    /// When the executing robot counts a waypoint reached ([`Reach`]): within the
+    /// reach radius (the default, the paper's, and runs saved before it existed) or,
+    /// as well, inside the goals that hold the planned waypoint.
+    #[serde(default)]
+    pub reach: Reach,
 }
 
 impl JointConfig {
@@ -198,6 +203,7 @@ impl Default for JointConfig {
             neural_obstacle: None,
             follow: Follow::Waypoints,
             off_track_weight: 0.0,
+            reach: Reach::Radius,
         }
     }
 }
@@ -652,7 +658,7 @@ impl JointTrainer {
         config
             .check_off_track_weight()
             .map_err(|message| RunError::Setting { key: "off_track_weight", message })?;
-        let task = Task { follow: config.follow, ..task };
+        let task = Task { follow: config.follow, reach: config.reach, ..task };
         let mut control = control;
         if config.control_target_kl.is_some() {
             control.learner.config.target_kl = config.control_target_kl;
@@ -762,14 +768,7 @@ impl JointTrainer {
         for (i, (env, path)) in self.envs.iter_mut().zip(paths).enumerate() {
             let seed: u64 = self.rng.random();
             let obs = &mut raw[i * od..(i + 1) * od];
-            dispatchers.push(start_run(
-                env.as_mut(),
-                seed,
-                path,
-                self.task.step_limit,
-                self.task.follow,
-                obs,
-            )?);
+            dispatchers.push(start_task_run(env.as_mut(), seed, path, &self.task, obs)?);
         }
         let mut learner = Learner {
             control: &mut self.control,

@@ -18,9 +18,11 @@
 pub mod along;
 mod follow;
 pub mod neural_sdf;
+mod reach;
 pub mod turn;
 
 pub use follow::Follow;
+pub use reach::Reach;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -88,6 +90,15 @@ pub struct GoalRegion {
     pub center: Vec<f64>,
     /// Radius.
     pub radius: f64,
+}
+
+impl GoalRegion {
+    /// Whether `point` lies strictly inside (the goal atom's robustness, radius
+    /// minus distance, is positive).
+    pub fn holds(&self, point: &[f64]) -> bool {
+        let d2: f64 = self.center.iter().zip(point).map(|(c, p)| (p - c) * (p - c)).sum();
+        d2.sqrt() < self.radius
+    }
 }
 
 /// Where a task's `safe` predicate checks the clearance from obstacles.
@@ -171,6 +182,9 @@ pub struct Task {
     /// The goal a robot executing a plan is given ([`Follow::Waypoints`] as loaded: a
     /// run's setting, not the task file's).
     pub follow: Follow,
+    /// When the executing robot counts a waypoint reached ([`Reach::Radius`] as
+    /// loaded: a run's setting, not the task file's).
+    pub reach: Reach,
 }
 
 /// What a task's `safe` measures obstacles with. The paper's planner saw a neural
@@ -520,6 +534,7 @@ impl Task {
             toml: toml_text.to_string(),
             obstacle: ObstacleModel::Exact,
             follow: Follow::Waypoints,
+            reach: Reach::Radius,
         })
     }
 
@@ -590,6 +605,14 @@ impl Task {
             .filter(|g| !avoid.contains(&g.name.as_str()))
             .map(|g| 2.0 * g.radius / 3.0)
             .fold(robot_reach, f64::min)
+    }
+
+    /// The goals (regions to avoid excepted, as loaded) that hold `point` strictly
+    /// inside: where [`Reach::InGoal`] asks the robot to be when it reaches a waypoint
+    /// planned at `point`.
+    pub fn goals_holding(&self, point: &[f64]) -> Vec<GoalRegion> {
+        let avoid: Vec<&str> = self.avoid_regions().iter().map(|g| g.name.as_str()).collect();
+        self.goals.iter().filter(|g| !avoid.contains(&g.name.as_str()) && g.holds(point)).cloned().collect()
     }
 
     /// The task with `safe` keeping `margin` more clearance from obstacles: the task
