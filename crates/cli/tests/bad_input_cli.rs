@@ -32,6 +32,15 @@ fn counts_that_would_allocate_without_bound_are_refused_by_flag() {
 }
 
 #[test]
+fn an_unknown_reach_rule_names_the_rules_there_are() {
+    fails_with(&["eval", "--ckpt", "x", "--reach", "inside"], "'inside' is not radius or in-goal");
+    fails_with(
+        &["train", "--task", "seq", "--out", "x", "--reach", "goal"],
+        "'goal' is not radius or in-goal",
+    );
+}
+
+#[test]
 fn bad_training_numbers_are_named_before_a_run_directory_is_made() {
     let scratch = tempfile::tempdir().unwrap();
     for (flag, value, needle) in [

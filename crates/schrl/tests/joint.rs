@@ -77,6 +77,25 @@ fn reaching_in_goal_waits_until_the_robot_is_inside_the_waypoints_goal() {
 }
 
 #[test]
+fn the_doggo_reaches_in_goal_by_default_and_the_other_robots_by_the_radius() {
+    use schrl::run::joint::JointRunSettings;
+    assert_eq!(Reach::default_for(sim::Robot::Doggo), Reach::InGoal);
+    // The Doggo's settings need MuJoCo (its reach radius); the others' are built here.
+    for robot in ["point", "car", "drone"] {
+        let task = Task::builtin(robot, TaskKind::Seq).unwrap();
+        assert_eq!(JointRunSettings::for_task(&task, 0).unwrap().joint.reach, Reach::Radius, "{robot}");
+        assert_eq!(Reach::default_for(task.robot), Reach::Radius, "{robot}");
+    }
+    // Runs saved before the setting existed keep the paper's rule.
+    let mut saved =
+        serde_json::to_value(JointConfig { reach: Reach::InGoal, ..JointConfig::default() }).unwrap();
+    assert_eq!(saved["reach"], "in-goal");
+    saved.as_object_mut().unwrap().remove("reach");
+    let old: JointConfig = serde_json::from_value(saved).unwrap();
+    assert_eq!(old.reach, Reach::Radius);
+}
+
+#[test]
 fn a_carrot_leads_along_the_planned_segment_and_stops_at_its_waypoint() {
     let carrot = Follow::Carrot { lookahead: 0.5 };
     let near = |a: Vec<f64>, b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);

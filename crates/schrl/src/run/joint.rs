@@ -148,8 +148,9 @@ pub struct JointConfig {
     #[serde(default)]
     pub off_track_weight: f64,
     /// When the executing robot counts a waypoint reached ([`Reach`]): within the
-    /// reach radius (the default, the paper's, and runs saved before it existed) or,
-    /// as well, inside the goals that hold the planned waypoint.
+    /// reach radius (the paper's, and runs saved before it existed) or, as well,
+    /// inside the goals that hold the planned waypoint; [`JointRunSettings::for_task`]
+    /// gives [`Reach::default_for`] the robot.
     #[serde(default)]
     pub reach: Reach,
 }
@@ -324,6 +325,7 @@ impl JointRunSettings {
                 safe_margin: DEFAULT_SAFE_MARGIN,
                 off_track_weight: crate::control::trainer::TrackDefaults::for_robot(task.robot)
                     .off_track_weight,
+                reach: Reach::default_for(task.robot),
                 ..JointConfig::default()
             },
             cpg: CpgConfig { seed, ..CpgConfig::default() },
