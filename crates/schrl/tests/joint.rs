@@ -77,14 +77,12 @@ fn reaching_in_goal_waits_until_the_robot_is_inside_the_waypoints_goal() {
 }
 
 #[test]
-fn the_doggo_reaches_in_goal_by_default_and_the_other_robots_by_the_radius() {
+fn every_robot_reaches_by_the_radius_unless_told_otherwise() {
     use schrl::run::joint::JointRunSettings;
-    assert_eq!(Reach::default_for(sim::Robot::Doggo), Reach::InGoal);
     // The Doggo's settings need MuJoCo (its reach radius); the others' are built here.
     for robot in ["point", "car", "drone"] {
         let task = Task::builtin(robot, TaskKind::Seq).unwrap();
         assert_eq!(JointRunSettings::for_task(&task, 0).unwrap().joint.reach, Reach::Radius, "{robot}");
-        assert_eq!(Reach::default_for(task.robot), Reach::Radius, "{robot}");
     }
     // Runs saved before the setting existed keep the paper's rule.
     let mut saved =

@@ -148,9 +148,8 @@ pub struct JointConfig {
     #[serde(default)]
     pub off_track_weight: f64,
     /// When the executing robot counts a waypoint reached ([`Reach`]): within the
-    /// reach radius (the paper's, and runs saved before it existed) or, as well,
-    /// inside the goals that hold the planned waypoint; [`JointRunSettings::for_task`]
-    /// gives [`Reach::default_for`] the robot.
+    /// reach radius (the default for every robot, the paper's, and runs saved before
+    /// it existed) or, as well, inside the goals that hold the planned waypoint.
     #[serde(default)]
     pub reach: Reach,
 }
@@ -325,7 +324,6 @@ impl JointRunSettings {
                 safe_margin: DEFAULT_SAFE_MARGIN,
                 off_track_weight: crate::control::trainer::TrackDefaults::for_robot(task.robot)
                     .off_track_weight,
-                reach: Reach::default_for(task.robot),
                 ..JointConfig::default()
             },
             cpg: CpgConfig { seed, ..CpgConfig::default() },

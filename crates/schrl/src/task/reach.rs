@@ -24,21 +24,6 @@ pub enum Reach {
     InGoal,
 }
 
-impl Reach {
-    /// The rule `schrl train` gives `robot`'s runs: [`Reach::InGoal`] for the Doggo,
-    /// whose 0.3 m Seq and Cover goals the goal margin cannot shrink (chosen on its
-    /// tuning seed 1's Seq: the same checkpoint evaluated 0.916 by the radius and
-    /// 0.988 in-goal, README *Reaching inside the goal*); [`Reach::Radius`], the
-    /// paper's, for Point, the Car and the Drone, whose runs were measured with it and
-    /// have not been re-derived.
-    pub fn default_for(robot: sim::Robot) -> Reach {
-        match robot {
-            sim::Robot::Doggo => Reach::InGoal,
-            sim::Robot::Point | sim::Robot::Car | sim::Robot::Drone => Reach::Radius,
-        }
-    }
-}
-
 impl std::fmt::Display for Reach {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
