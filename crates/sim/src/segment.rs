@@ -54,6 +54,11 @@ pub fn segment_box_2d(a: &[f64], b: &[f64], center: &[f64; 2], half: &[f64; 2]) 
     best
 }
 
+/// Euclidean distance between two points (any dimension).
+pub fn point_distance(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
+}
+
 /// Distance from `p` to the segment `a → b` (any dimension).
 pub fn point_segment_distance(p: &[f64], a: &[f64], b: &[f64]) -> f64 {
     let s = closest_fraction(p, a, b);

@@ -96,14 +96,9 @@ impl ControlReward for NoControlReward {
     }
 }
 
-/// The Euclidean distance between two points.
-fn distance(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
-}
-
 /// `Σ_i ‖a_i − b_i‖` over the waypoints of two paths (`[waypoints][dim]`, row-major).
 fn summed_distance(a: &[f64], b: &[f64], dim: usize) -> f64 {
-    a.chunks(dim).zip(b.chunks(dim)).map(|(x, y)| distance(x, y)).sum()
+    a.chunks(dim).zip(b.chunks(dim)).map(|(x, y)| sim::segment::point_distance(x, y)).sum()
 }
 
 /// The length of one path (`[waypoints][dim]`, row-major): the sum of its segments.

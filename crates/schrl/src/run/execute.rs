@@ -130,9 +130,8 @@ impl WaypointDispatcher {
         let reached = match &self.inside {
             None => step.reached,
             Some(rule) => {
-                let w = &self.waypoints[self.next];
-                let d2: f64 = w.iter().zip(position).map(|(a, b)| (a - b) * (a - b)).sum();
-                d2.sqrt() <= rule.radius && rule.goals[self.next].iter().all(|g| g.holds(position))
+                sim::segment::point_distance(&self.waypoints[self.next], position) <= rule.radius
+                    && rule.goals[self.next].iter().all(|g| g.holds(position))
             }
         };
         if reached {

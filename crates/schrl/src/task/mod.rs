@@ -96,8 +96,7 @@ impl GoalRegion {
     /// Whether `point` lies strictly inside (the goal atom's robustness, radius
     /// minus distance, is positive).
     pub fn holds(&self, point: &[f64]) -> bool {
-        let d2: f64 = self.center.iter().zip(point).map(|(c, p)| (p - c) * (p - c)).sum();
-        d2.sqrt() < self.radius
+        sim::segment::point_distance(&self.center, point) < self.radius
     }
 }
 
