@@ -152,11 +152,11 @@ impl PyWatcher {
 impl Watcher for PyWatcher {
     fn progress(&mut self, p: Progress<'_>) {
         self.call(|d| match p {
-            Progress::Controller { update, total, success_rate } => {
+            Progress::Controller { metrics, total } => {
                 d.set_item("stage", "controller")?;
-                d.set_item("done", update)?;
+                d.set_item("done", metrics.update)?;
                 d.set_item("total", total)?;
-                d.set_item("success_rate", success_rate)
+                d.set_item("success_rate", metrics.success_rate)
             }
             Progress::Pretrain(p) => {
                 d.set_item("stage", "pretrain")?;
@@ -319,18 +319,25 @@ fn train<'py>(
         RunSession::create(&out, s, existing).map_err(train_error)?
     };
     let mut watcher = PyWatcher { callback: progress, raised: None };
-    let trained = py.allow_threads(|| session.train(&mut watcher)).map_err(train_error)?;
-    let t = &trained.trainer;
+    let trained = py.allow_threads(|| session.train(&mut watcher));
     if let Some(e) = watcher.raised {
         if e.is_instance_of::<PyKeyboardInterrupt>(py) {
+            let saved = match &trained {
+                Ok(t) => format!("iteration {}", t.trainer.iterations),
+                Err(TrainError::StoppedInController { update, .. }) => {
+                    format!("the general controller at update {update}")
+                }
+                Err(e) => return Err(PyRuntimeError::new_err(e.to_string())),
+            };
             return Err(PyKeyboardInterrupt::new_err(format!(
-                "interrupted: saved iteration {} in {}; continue with resume=True",
-                t.iterations,
+                "interrupted: saved {saved} in {}; continue with resume=True",
                 out.display()
             )));
         }
         return Err(e);
     }
+    let trained = trained.map_err(train_error)?;
+    let t = &trained.trainer;
     let d = PyDict::new(py);
     d.set_item("out", out)?;
     d.set_item("iterations", t.iterations)?;

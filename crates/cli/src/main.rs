@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 mod commands;
 mod experiment;
 mod interrupt;
+mod progress;
 mod report;
 
 /// Teach robots tasks written as Signal Temporal Logic specifications.

@@ -40,6 +40,13 @@ fn trains_resumes_refuses_to_clobber_and_evaluates() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stdout(&o).contains("success rate: "), "{}", stdout(&o));
+    // Regression: with stderr in a log file the progress bars are hidden, and such
+    // logs of hour-long runs said nothing until the end. Now each stage writes a line
+    // at every tenth of its way: here, both updates.
+    let log = stderr(&o);
+    let progress: Vec<&str> = log.lines().filter(|l| l.starts_with("controller ")).collect();
+    assert_eq!(progress.len(), 2, "{log}");
+    assert!(progress[1].starts_with("controller 2/2 (") && progress[1].contains("steps/s"), "{progress:?}");
     for f in ["manifest.json", "metrics.jsonl", "training_curve.png"] {
         assert!(dir.join(f).exists(), "{f} missing");
     }

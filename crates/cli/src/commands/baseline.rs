@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use schrl::baseline::crm::{CrmMetrics, CrmSettings, CrmTrainer};
 use schrl::baseline::dhrm::DhrmConfig;
 use schrl::baseline::flat::{self, EpisodeSummary, MeanPolicy};
@@ -21,6 +20,8 @@ use sim::Robot;
 use sim::render::{ChartPanel, Series};
 
 use super::train::print_eval;
+
+use crate::progress::LoggedBar;
 
 /// Subcommands of `schrl baseline`.
 #[derive(clap::Subcommand, Debug)]
@@ -169,7 +170,9 @@ trait FlatBaseline: Sized {
     fn save(&self, files: &mut SaveFiles) -> Result<(), StoreError>;
     fn settings(&mut self) -> &mut Self::Settings;
     fn task(&self) -> &Task;
-    /// `(done, total)` in the progress bar's units.
+    /// What the progress bar counts: updates or steps.
+    const UNIT: &'static str;
+    /// `(done, total)` in the progress bar's [`Self::UNIT`].
     fn progress(&self) -> (u64, u64);
     fn finished(&self) -> bool;
     fn train(&mut self) -> Result<Self::Metrics>;
@@ -299,6 +302,7 @@ impl FlatBaseline for TltlTrainer {
     fn task(&self) -> &Task {
         &self.task
     }
+    const UNIT: &'static str = "updates";
     fn progress(&self) -> (u64, u64) {
         (self.updates as u64, self.total_updates() as u64)
     }
@@ -334,6 +338,7 @@ impl FlatBaseline for CrmTrainer {
     fn task(&self) -> &Task {
         &self.task
     }
+    const UNIT: &'static str = "steps";
     fn progress(&self) -> (u64, u64) {
         (self.steps as u64, self.settings.steps as u64)
     }
@@ -422,21 +427,16 @@ fn train_flat<B: FlatBaseline>(args: &TrainArgs) -> Result<()> {
         MetricsLog::open(&run, resumed, |m: &B::Metrics| m.summary().env_steps <= steps_done)
             .map_err(super::store_error)?;
     let (done, total) = trainer.progress();
-    let bar = ProgressBar::new(total);
-    bar.set_style(ProgressStyle::with_template(&format!(
-        "{:>10} {{bar:40}} {{percent}}% {{elapsed_precise}} {{msg}}",
-        B::KIND.name()
-    ))?);
-    bar.set_position(done);
+    let mut bar = LoggedBar::new(total, B::KIND.name(), B::UNIT);
+    bar.start_at(done);
     let mut interrupted = false;
     let save_every = trainer.settings().budget().2.to_owned();
     while !trainer.finished() {
         let m = trainer.train()?;
         log.append(&m)?;
-        bar.set_position(trainer.progress().0);
         history.push(m);
         let (score, sat) = window(&history[history.len().saturating_sub(20)..]);
-        bar.set_message(format!("score {score:.3} satisfaction {sat:.2}"));
+        bar.set(trainer.progress().0, format!("score {score:.3} satisfaction {sat:.2}"));
         if history.last().is_some_and(|m| m.index().is_multiple_of(save_every)) {
             run.save(|f| trainer.save(f))?;
         }
@@ -445,7 +445,7 @@ fn train_flat<B: FlatBaseline>(args: &TrainArgs) -> Result<()> {
             break;
         }
     }
-    bar.finish_and_clear();
+    bar.clear();
     run.save(|f| trainer.save(f))?;
     if interrupted {
         return Err(crate::interrupt::stopped(&out, format!("step {}", trainer.env_steps())));

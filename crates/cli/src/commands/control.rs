@@ -3,12 +3,12 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use schrl::control::trainer::EVAL_SEED;
-use schrl::control::{ControlConfig, ControlMetrics, ControlTrainer, NearGoals, PpoConfig};
+use schrl::control::{ControlConfig, NearGoals, PpoConfig};
 use schrl::run::evaluate::{ControllerEval, GoalDraw, GoalEpisode, evaluate_controller, goal_episodes};
-use schrl::store::{self, MetricsLog, RunKind, RunWriter};
-use sim::render::{ChartPanel, Goal, PathKind, Polyline, RobotMarker, Scene, Series};
+use schrl::store::{self, RunKind};
+use schrl::train::controller::ControllerSession;
+use sim::render::{Goal, PathKind, Polyline, RobotMarker, Scene};
 use sim::{Map, Robot};
 
 /// Subcommands of `schrl control`.
@@ -76,7 +76,7 @@ pub struct TrainArgs {
     #[command(flatten)]
     run: super::RunDirArgs,
     /// Save a checkpoint every this many updates (and at the end).
-    #[arg(long, default_value_t = 25)]
+    #[arg(long, default_value_t = schrl::train::controller::SAVE_EVERY)]
     save_every: usize,
     /// Episodes of the evaluation after training (0: none).
     #[arg(long, default_value_t = 200, value_parser = super::count::<0, 100_000>)]
@@ -205,68 +205,30 @@ impl TrainArgs {
 
 fn train(args: TrainArgs) -> Result<()> {
     let out = args.run.out.clone();
-    let (mut run, mut trainer, resumed) = if args.run.resume {
-        let (mut run, ckpt) = RunWriter::resume(&out, RunKind::Controller).map_err(super::store_error)?;
-        let config = args.resumed(&run.settings().map_err(super::store_error)?)?;
-        run.set_settings(&config).map_err(super::store_error)?;
-        let trainer = if ckpt.has_files() {
-            let mut t = store::controller::load_from(&ckpt)?;
-            t.config.total_steps = config.total_steps;
-            t
-        } else {
-            ControlTrainer::new(config)?
-        };
-        (run, trainer, true)
+    let session = if args.run.resume {
+        let mut session = ControllerSession::resume(&out).map_err(super::train::train_error)?;
+        let config = args.resumed(session.settings())?;
+        session.set_total_steps(config.total_steps).map_err(super::train::train_error)?;
+        session
     } else {
-        let config = args.settings()?;
-        let trainer = ControlTrainer::new(config.clone())?;
-        let run = RunWriter::create(&out, RunKind::Controller, &config, args.run.existing())
-            .map_err(super::store_error)?;
-        (run, trainer, false)
+        ControllerSession::create(&out, args.settings()?, args.run.existing())
+            .map_err(super::train::train_error)?
     };
     crate::interrupt::install();
-    let updates = trainer.updates;
-    let (mut log, mut history) = MetricsLog::open(&run, resumed, |m: &ControlMetrics| m.update <= updates)
-        .map_err(super::store_error)?;
-    let total = trainer.total_updates();
-    let bar = ProgressBar::new(total as u64);
-    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} updates {elapsed_precise} {msg}")?);
-    bar.set_position(trainer.updates as u64);
-    let start = std::time::Instant::now();
-    let first_step = trainer.steps;
-    let mut interrupted = false;
-    while !trainer.finished() {
-        let m = trainer.train_update()?;
-        log.append(&m)?;
-        bar.set_position(m.update as u64);
-        bar.set_message(format!(
-            "success {} return {} {:.0} steps/s",
-            m.success_rate.map_or("-".into(), |s| format!("{s:.2}")),
-            m.mean_return.map_or("-".into(), |r| format!("{r:.1}")),
-            m.steps_per_sec
-        ));
-        history.push(m);
-        if trainer.updates % args.save_every.max(1) == 0 {
-            run.save(|f| store::controller::save_into(f, &trainer))?;
-        }
-        if crate::interrupt::requested() {
-            interrupted = true;
-            break;
-        }
-    }
-    bar.finish_and_clear();
-    run.save(|f| store::controller::save_into(f, &trainer))?;
-    if interrupted {
+    let mut bars = super::train::Bars::default();
+    let trained = session.train(args.save_every, &mut bars);
+    bars.clear();
+    let trained = trained.map_err(super::train::train_error)?;
+    let trainer = &trained.trainer;
+    if trained.stopped {
         return Err(crate::interrupt::stopped(&out, format!("update {}", trainer.updates)));
     }
-    let wall = start.elapsed().as_secs_f64();
-    let curve = out.join("training_curve.png");
-    save_curve(&history, &curve)?;
     println!(
-        "trained the {} for {} environment steps in {wall:.1} s ({:.0} steps/s); run in {}",
+        "trained the {} for {} environment steps in {:.1} s ({:.0} steps/s); run in {}",
         trainer.config.robot,
         trainer.steps,
-        (trainer.steps - first_step) as f64 / wall.max(1e-9),
+        trained.seconds,
+        trained.steps as f64 / trained.seconds.max(1e-9),
         out.display()
     );
     if args.eval_episodes > 0 {
@@ -281,32 +243,6 @@ fn train(args: TrainArgs) -> Result<()> {
         )?;
         print_eval(&r);
     }
-    Ok(())
-}
-
-/// Success rate (top, 0–1) and mean episode return (bottom) against steps.
-fn save_curve(history: &[ControlMetrics], out: &Path) -> Result<()> {
-    let series = |label: &str, f: &dyn Fn(&ControlMetrics) -> Option<f64>| Series {
-        label: label.into(),
-        points: history.iter().filter_map(|m| f(m).map(|y| (m.steps as f64, y))).collect(),
-        band: vec![],
-        colour: None,
-    };
-    let panels = [
-        ChartPanel {
-            series: vec![series("goals reached (last 100 episodes)", &|m| m.success_rate)],
-            y_range: Some((0.0, 1.0)),
-            y_label: "success rate".into(),
-            reference: None,
-        },
-        ChartPanel {
-            series: vec![series("mean episode return", &|m| m.mean_return)],
-            y_range: None,
-            y_label: "return".into(),
-            reference: None,
-        },
-    ];
-    sim::render::save_chart(&panels, "environment steps", out, true)?;
     Ok(())
 }
 

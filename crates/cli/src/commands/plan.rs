@@ -19,6 +19,8 @@ use schrl::task::{SafeAlong, Task, TaskKind};
 use sim::render::{PathKind, Polyline, Scene};
 use stl::Semantics;
 
+use crate::progress::LoggedBar;
+
 /// Subcommands of `schrl plan`.
 #[derive(clap::Subcommand, Debug)]
 pub enum Command {
@@ -442,11 +444,8 @@ fn train(args: TrainArgs) -> Result<()> {
     crate::interrupt::install();
     let (mut log, _) = MetricsLog::open(&run, was_resumed, |m: &PlanMetrics| m.update <= done)
         .map_err(super::store_error)?;
-    let bar = ProgressBar::new(settings.updates as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} updates {msg}").expect("valid template"),
-    );
-    bar.set_position(done as u64);
+    let mut bar = LoggedBar::new(settings.updates as u64, "planner", "updates");
+    bar.start_at(done as u64);
     let start = std::time::Instant::now();
     let mut interrupted = false;
     while !reached && done < settings.updates {
@@ -461,8 +460,7 @@ fn train(args: TrainArgs) -> Result<()> {
             seconds: start.elapsed().as_secs_f64(),
             restarts: trainer.restarts(),
         })?;
-        bar.set_position(done as u64);
-        bar.set_message(format!("satisfaction {:.2} λ {:.2}", s.satisfaction, s.lambda));
+        bar.set(done as u64, format!("satisfaction {:.2} λ {:.2}", s.satisfaction, s.lambda));
         // Confirm on fresh paths before stopping, so one lucky batch does not end training.
         reached =
             s.satisfaction >= settings.target && trainer.satisfaction(CONFIRM_SAMPLES)? >= settings.target;
@@ -474,7 +472,7 @@ fn train(args: TrainArgs) -> Result<()> {
             break;
         }
     }
-    bar.finish_and_clear();
+    bar.clear();
     run.save(|f| store::planner::save_into(f, &trainer, done, reached))?;
     if interrupted {
         return Err(crate::interrupt::stopped(&out, format!("update {done}")));

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use schrl::plan::cpg::{AnchorKind, Method};
 use schrl::plan::planner::PlannerKind;
 use schrl::run::RunError;
@@ -18,6 +17,8 @@ use schrl::task::{Follow, Reach};
 use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watcher};
 use sim::Robot;
 use stl::Semantics;
+
+use crate::progress::LoggedBar;
 
 /// Arguments of `schrl train`. Flags left out take the default shown; with
 /// `--resume` they take the saved run's value, and a flag given with another value is
@@ -442,36 +443,34 @@ enum PlannerChoice {
     Mip,
 }
 
-fn bar(len: u64, what: &str) -> ProgressBar {
-    let b = ProgressBar::new(len);
-    let template = format!("{what:>10} {{bar:40}} {{percent}}% {{elapsed_precise}} {{msg}}");
-    b.set_style(ProgressStyle::with_template(&template).expect("a valid template"));
-    b
-}
-
-/// `schrl train`'s view of a run: one progress bar per stage, notes on stderr, and
-/// Ctrl-C as the request to stop.
+/// The training commands' view of a run (`schrl train`, `schrl control train`): one
+/// progress bar per stage (lines in a log), notes on stderr, and Ctrl-C as the request
+/// to stop.
 #[derive(Default)]
-struct Bars {
+pub(crate) struct Bars {
     /// The stage shown and its bar.
-    current: Option<(&'static str, ProgressBar)>,
+    current: Option<(&'static str, LoggedBar)>,
 }
 
 impl Bars {
-    /// The bar of `stage`, replacing the previous stage's.
-    fn stage(&mut self, stage: &'static str, len: u64) -> &ProgressBar {
+    /// Shows `stage` at `pos` of `len` `unit`s with `message`, replacing the previous
+    /// stage's bar.
+    fn show(&mut self, stage: &'static str, unit: &str, (pos, len): (u64, u64), message: String) {
         if self.current.as_ref().is_none_or(|(s, _)| *s != stage) {
             self.clear();
-            self.current = Some((stage, bar(len, stage)));
+            let mut b = LoggedBar::new(len, stage, unit);
+            // A resumed stage logs from where it resumed.
+            b.start_at(pos.saturating_sub(1));
+            self.current = Some((stage, b));
         }
-        let b = &self.current.as_ref().expect("set above").1;
+        let b = &mut self.current.as_mut().expect("set above").1;
         b.set_length(len);
-        b
+        b.set(pos, message);
     }
 
-    fn clear(&mut self) {
+    pub(crate) fn clear(&mut self) {
         if let Some((_, b)) = self.current.take() {
-            b.finish_and_clear();
+            b.clear();
         }
     }
 }
@@ -479,23 +478,26 @@ impl Bars {
 impl Watcher for Bars {
     fn progress(&mut self, p: Progress<'_>) {
         match p {
-            Progress::Controller { update, total, success_rate } => {
-                let b = self.stage("controller", total as u64);
-                b.set_position(update as u64);
-                b.set_message(format!("success {}", success_rate.map_or("-".into(), |s| format!("{s:.2}"))));
+            Progress::Controller { metrics: m, total } => {
+                let message = format!(
+                    "success {} return {} {:.0} steps/s",
+                    m.success_rate.map_or("-".into(), |s| format!("{s:.2}")),
+                    m.mean_return.map_or("-".into(), |r| format!("{r:.1}")),
+                    m.steps_per_sec
+                );
+                self.show("controller", "updates", (m.update as u64, total as u64), message);
             }
             Progress::Pretrain(p) => {
-                let b = self.stage("planner", p.total as u64);
-                b.set_position(p.done as u64);
-                b.set_message(format!("candidate {}: plan satisfaction {:.2}", p.candidate, p.satisfaction));
+                let message = format!("candidate {}: plan satisfaction {:.2}", p.candidate, p.satisfaction);
+                self.show("planner", "updates", (p.done as u64, p.total as u64), message);
             }
             Progress::Joint { metrics, total_steps, satisfaction, plan_satisfaction } => {
-                let b = self.stage("joint", total_steps as u64);
-                b.set_position(metrics.env_steps.min(total_steps) as u64);
-                b.set_message(format!(
+                let message = format!(
                     "satisfaction {satisfaction:.2} (plans {plan_satisfaction:.2}) λ {:.2}",
                     metrics.lambda
-                ));
+                );
+                let pos = metrics.env_steps.min(total_steps) as u64;
+                self.show("joint", "steps", (pos, total_steps as u64), message);
             }
         }
     }
@@ -562,9 +564,13 @@ pub fn train(args: TrainArgs) -> Result<()> {
 }
 
 /// A training error as the command line says it: settings by their flags, store
-/// errors with the flag that would help.
-fn train_error(e: TrainError) -> anyhow::Error {
+/// errors with the flag that would help, a stop as Ctrl-C's.
+pub(crate) fn train_error(e: TrainError) -> anyhow::Error {
     match e {
+        TrainError::StoppedInController { update, dir } => {
+            let run = dir.parent().unwrap_or(&dir);
+            crate::interrupt::stopped(run, format!("the general controller at update {update}"))
+        }
         TrainError::Setting(e) => flag_error(e),
         TrainError::Store(e) => super::store_error(e),
         TrainError::ControllerRobot { dir, found, wanted } => {

@@ -2,8 +2,9 @@
 //! `schrl.train` call, so both make the same run from the same settings.
 //!
 //! The stages, in order: the warm-start controller (a given `schrl control train` run,
-//! or a general controller trained into the run's `general/`, reused when finished
-//! there), pre-training of the planner on the spec (the first checkpoint), the joint
+//! or a general controller trained into the run's `general/` by [`controller`], with
+//! its own checkpoints, reused when finished there and continued when not),
+//! pre-training of the planner on the spec (the first checkpoint), the joint
 //! phase ([`JointTrainer::iterate`], a checkpoint every `save_every` iterations and at
 //! the end, one metrics line per iteration) until the step budget or the target, then
 //! the training curve and, with `eval_groups > 0`, the evaluation of the mean plans
@@ -19,13 +20,15 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::control::{ControlConfig, ControlTrainer};
+use crate::control::ControlMetrics;
 use crate::plan::pretrain::{PretrainProgress, pretrain};
 use crate::run::RunError;
 use crate::run::evaluate::{EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task};
 use crate::run::joint::{JointMetrics, JointRunSettings, JointTrainer, SettingError};
 use crate::run::select::{Selection, Validation};
 use crate::store::{self, Existing, MetricsLog, RunKind, RunWriter, StoreError};
+
+pub mod controller;
 
 /// Iterations the early stop and the progress figures average over.
 pub const RECENT: usize = 20;
@@ -45,6 +48,15 @@ pub enum TrainError {
     /// Planning, control, execution or a picture.
     #[error(transparent)]
     Run(#[from] RunError),
+    /// The watcher asked to stop while the general controller trained; its checkpoint
+    /// is saved and a resumed run continues it.
+    #[error("stopped while training the general controller; saved update {update} in {dir}")]
+    StoppedInController {
+        /// Updates saved.
+        update: usize,
+        /// The controller's run directory (the run's `general/`).
+        dir: PathBuf,
+    },
     /// The warm-start controller drives another robot.
     #[error("controller {dir}: a {found} controller, not {wanted}")]
     ControllerRobot {
@@ -72,15 +84,12 @@ impl From<candle_core::Error> for TrainError {
 /// How far a stage has come.
 #[derive(Clone, Copy, Debug)]
 pub enum Progress<'a> {
-    /// Training the general controller: PPO updates done of `total`, and the success
-    /// rate over its last goals.
+    /// Training the controller: one PPO update done (`metrics.update` of `total`).
     Controller {
-        /// Updates done.
-        update: usize,
+        /// What the update measured.
+        metrics: &'a ControlMetrics,
         /// Updates planned.
         total: usize,
-        /// Fraction of recent goals reached (none before the first finished goal).
-        success_rate: Option<f64>,
     },
     /// Pre-training the planner on the spec.
     Pretrain(PretrainProgress),
@@ -225,7 +234,8 @@ impl RunSession {
             watcher.note(n);
         }
         // Before the first checkpoint a resumed run starts again from its settings,
-        // which repeats the same work exactly (a finished general controller is reused).
+        // which repeats the same work exactly (the general controller continues from
+        // its own checkpoint).
         let resumed = self.saved.is_some();
         let mut trainer = match self.saved.take() {
             Some(t) => t,
@@ -394,7 +404,7 @@ fn first_checkpoint(
             }
             c
         }
-        None => general_controller(s.robot, s.seed, &run.dir().join("general"), watcher)?,
+        None => controller::general_controller(s.robot, s.seed, &run.dir().join("general"), watcher)?,
     };
     let mut t = JointTrainer::new(task, s.joint.clone(), s.cpg, control)?;
     let kept = pretrain(&mut t, &s.pretrain, &mut |p| watcher.progress(Progress::Pretrain(p)))?;
@@ -436,33 +446,6 @@ fn first_checkpoint(
         ));
     }
     run.save(|f| store::joint::save_into(f, &t))?;
-    Ok(t)
-}
-
-/// The general controller for `robot` in `dir`: reused when a finished one with the
-/// same settings is there (a resumed run), else trained there.
-fn general_controller(
-    robot: sim::Robot,
-    seed: u64,
-    dir: &Path,
-    watcher: &mut dyn Watcher,
-) -> Result<ControlTrainer, TrainError> {
-    let mut cfg = ControlConfig::for_robot(robot);
-    cfg.seed = seed;
-    if let Ok(t) = store::controller::load(dir)
-        && t.config == cfg
-        && t.finished()
-    {
-        return Ok(t);
-    }
-    let mut run = RunWriter::create(dir, RunKind::Controller, &cfg, Existing::Replace)?;
-    let mut t = ControlTrainer::new(cfg)?;
-    let total = t.total_updates();
-    while !t.finished() {
-        let m = t.train_update()?;
-        watcher.progress(Progress::Controller { update: m.update, total, success_rate: m.success_rate });
-    }
-    run.save(|f| store::controller::save_into(f, &t))?;
     Ok(t)
 }
 
