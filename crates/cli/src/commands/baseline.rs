@@ -101,15 +101,8 @@ pub struct EvalArgs {
     /// Run directory of `schrl baseline train` (or of `schrl train`).
     #[arg(long)]
     ckpt: PathBuf,
-    /// Groups of runs.
-    #[arg(long, default_value_t = EVAL_GROUPS, value_parser = super::count::<1, 100>)]
-    groups: usize,
-    /// Runs per group.
-    #[arg(long, default_value_t = EVAL_PER_GROUP, value_parser = super::count::<1, 10_000>)]
-    per_group: usize,
-    /// Seed of starts.
-    #[arg(long, default_value_t = EVAL_SEED)]
-    seed: u64,
+    #[command(flatten)]
+    runs: super::EvalRunsArgs,
     /// Picture of a few evaluated runs (PNG or SVG).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -524,7 +517,7 @@ fn eval(args: EvalArgs) -> Result<()> {
     if let Some(out) = &args.out {
         sim::render::check_target(out, args.force)?;
     }
-    let sizes = (args.groups, args.per_group);
+    let sizes = args.runs.sizes();
     let kind = Checkpoint::open(&args.ckpt, RunKind::Tltl).map(|_| RunKind::Tltl).or_else(|e| match e {
         StoreError::OtherKind { found, .. } => Ok(found),
         e => Err(super::store_error(e)),
@@ -532,16 +525,16 @@ fn eval(args: EvalArgs) -> Result<()> {
     let (task, e): (Task, TaskEval) = match kind {
         RunKind::Tltl => {
             let t = store::tltl::load(&args.ckpt).map_err(super::store_error)?;
-            (t.task.clone(), FlatBaseline::evaluate(&t, sizes, args.seed)?)
+            (t.task.clone(), FlatBaseline::evaluate(&t, sizes, args.runs.seed)?)
         }
         RunKind::Crm => {
             let t = store::crm::load(&args.ckpt).map_err(super::store_error)?;
-            (t.task.clone(), FlatBaseline::evaluate(&t, sizes, args.seed)?)
+            (t.task.clone(), FlatBaseline::evaluate(&t, sizes, args.runs.seed)?)
         }
         RunKind::Joint => {
             let (t, _) = store::joint::load_deployed(&args.ckpt).map_err(super::store_error)?;
             let plans = Plans::Mean(t.plan.planner());
-            let e = evaluate_task(&t.task, plans, &t.control.controller(), sizes, args.seed)?;
+            let e = evaluate_task(&t.task, plans, &t.control.controller(), sizes, args.runs.seed)?;
             (t.task.clone(), e)
         }
         other => bail!(

@@ -36,6 +36,29 @@ impl RunDirArgs {
     }
 }
 
+/// How many runs an evaluation executes, in groups (the paper's 5 × 100), and from
+/// which seed: shared by `schrl eval` and `schrl baseline eval`, so both protocols
+/// are the same flags with the same defaults.
+#[derive(clap::Args, Debug)]
+pub struct EvalRunsArgs {
+    /// Groups of runs.
+    #[arg(long, default_value_t = schrl::run::evaluate::EVAL_GROUPS, value_parser = count::<1, 100>)]
+    pub groups: usize,
+    /// Runs per group.
+    #[arg(long, default_value_t = schrl::run::evaluate::EVAL_PER_GROUP, value_parser = count::<1, 10_000>)]
+    pub per_group: usize,
+    /// Seed of the runs' starts (and of sampled plans).
+    #[arg(long, default_value_t = schrl::run::evaluate::EVAL_SEED)]
+    pub seed: u64,
+}
+
+impl EvalRunsArgs {
+    /// `(groups, runs per group)`.
+    pub fn sizes(&self) -> (usize, usize) {
+        (self.groups, self.per_group)
+    }
+}
+
 /// A count flag's parser: a whole number in `LO..=HI`. The bounds keep what a flag
 /// allocates finite (`plan sample --n 3000000` once aborted on allocation).
 pub fn count<const LO: usize, const HI: usize>(s: &str) -> Result<usize, String> {

@@ -7,9 +7,7 @@ use anyhow::{Result, bail};
 use schrl::plan::cpg::{AnchorKind, Method};
 use schrl::plan::planner::PlannerKind;
 use schrl::run::RunError;
-use schrl::run::evaluate::{
-    EVAL_GROUPS, EVAL_PER_GROUP, EVAL_SEED, Plans, RunRecord, TaskEval, evaluate_task_with, mean_std,
-};
+use schrl::run::evaluate::{Plans, RunRecord, TaskEval, evaluate_task_with, mean_std};
 use schrl::run::joint::{JointRunSettings, SettingError};
 use schrl::store::{self, JsonLines, RunKind};
 use schrl::task::neural_sdf::{NeuralSdf, SdfFitConfig};
@@ -383,15 +381,8 @@ pub struct EvalArgs {
     /// Run directory of `schrl train`.
     #[arg(long)]
     ckpt: PathBuf,
-    /// Groups of runs.
-    #[arg(long, default_value_t = EVAL_GROUPS, value_parser = super::count::<1, 100>)]
-    groups: usize,
-    /// Runs per group.
-    #[arg(long, default_value_t = EVAL_PER_GROUP, value_parser = super::count::<1, 10_000>)]
-    per_group: usize,
-    /// Seed of starts and plans.
-    #[arg(long, default_value_t = EVAL_SEED)]
-    seed: u64,
+    #[command(flatten)]
+    runs: super::EvalRunsArgs,
     /// Picture of executed runs with their planned waypoints (PNG or SVG).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -605,9 +596,6 @@ pub(crate) fn print_eval(e: &TaskEval) {
 
 /// Runs `schrl eval`.
 pub fn eval(args: EvalArgs) -> Result<()> {
-    if args.groups == 0 || args.per_group == 0 {
-        bail!("--groups and --per-group must be at least 1");
-    }
     let (t, selected) = store::joint::load_deployed(&args.ckpt).map_err(super::store_error)?;
     if let Some(v) = &selected {
         println!("{}", deployed(v));
@@ -656,25 +644,19 @@ pub fn eval(args: EvalArgs) -> Result<()> {
         task.reach = reach;
     }
     let task = &task;
-    let sizes = (args.groups, args.per_group);
-    let e =
-        evaluate_task_with(
-            task,
-            plans,
-            &controller,
-            sizes,
-            args.seed,
-            &mut |group, index, run| match records.as_mut() {
-                Some(w) => w
-                    .append(&RunRecord::of(run, task, group, index))
-                    .map_err(|e| RunError::Record(e.to_string())),
-                None => Ok(()),
-            },
-        )?;
+    let sizes = args.runs.sizes();
+    let e = evaluate_task_with(task, plans, &controller, sizes, args.runs.seed, &mut |group, index, run| {
+        match records.as_mut() {
+            Some(w) => {
+                w.append(&RunRecord::of(run, task, group, index)).map_err(|e| RunError::Record(e.to_string()))
+            }
+            None => Ok(()),
+        }
+    })?;
     print_eval(&e);
     if let (Some(w), Some(path)) = (records, &args.trajectories) {
         w.finish().map_err(super::store_error)?;
-        println!("wrote {} runs to {}", args.groups * args.per_group, path.display());
+        println!("wrote {} runs to {}", args.runs.groups * args.runs.per_group, path.display());
     }
     if let Some(out) = &args.out {
         e.save_picture(&t.task, out, args.force)?;
