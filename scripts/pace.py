@@ -12,7 +12,10 @@ Reads the file `schrl eval --trajectories FILE.jsonl` writes (one run per line, 
   bins: 0–30° is moving nose first, 150–180° tail first;
 - how far the robot strays from the straight segment it is driving (from the waypoint
   it last reached, or its start, to the next): the cross-track distance at every step,
-  median, 90th and 99th percentile. A planner's clearance must cover this.
+  median, 90th and 99th percentile, and the largest of each hop's (one per waypoint
+  driven to). A planner's clearance must cover this;
+- where the runs that collided or fell ended: the hop, how many steps after the last
+  waypoint reached, and how far from the segment then.
 
 Windows that move less than 5 cm net are left out of the last two (turning on the
 spot has no direction of travel). Standard library only.
@@ -27,10 +30,12 @@ import sys
 
 def main(path):
     runs = [json.loads(line) for line in open(path)]
-    net50, along, across, facing, off_segment = [], [], [], [0] * 6, []
+    net50, along, across, facing, off_segment, hop_max = [], [], [], [0] * 6, [], []
     for run in runs:
         p, yaw = run["positions"], run["headings"]
-        off_segment += cross_track(run)
+        hops = cross_track(run)
+        off_segment += [d for hop in hops for d in hop]
+        hop_max += [max(hop) for hop in hops if hop]
         for i in range(0, len(p) - 50, 50):
             net50.append(math.dist(p[i][:2], p[i + 50][:2]) / 50)
         for i in range(5, len(p) - 6):
@@ -56,10 +61,28 @@ def main(path):
         off_segment.sort()
         q = lambda f: off_segment[int(f * (len(off_segment) - 1))]
         print(f"off the segment driven: median {q(0.5):.3f} m, 90th percentile {q(0.9):.3f} m, 99th {q(0.99):.3f} m")
+        hop_max.sort()
+        h = lambda f: hop_max[int(f * (len(hop_max) - 1))]
+        print(
+            f"largest of each of {len(hop_max)} hops: median {h(0.5):.3f} m, 90th percentile {h(0.9):.3f} m, "
+            f"99th {h(0.99):.3f} m"
+        )
+    for run in runs:
+        if run["outcome"] not in ("collided", "fell"):
+            continue
+        hops = cross_track(run)
+        reached = len(run["reached_at"])
+        since = len(run["positions"]) - (run["reached_at"][-1] if reached else 0)
+        x, y = run["positions"][-1][:2]
+        off = hops[-1][-1] if hops and hops[-1] else float("nan")
+        print(
+            f"{run['outcome']} at ({x:.2f}, {y:.2f}) driving to waypoint {reached + 1}, "
+            f"{since} steps after the last reached, {off:.2f} m off the segment"
+        )
 
 
 def cross_track(run):
-    """Distances from each position to the segment the robot is driving then."""
+    """Per hop, the distances from each position to the segment the robot is driving then."""
     p, w = run["positions"], run["waypoints"]
     # waypoints[0] is the start; reached_at[k] is the step waypoint k + 1 was reached.
     ends = run["reached_at"] + [len(p)]
@@ -70,9 +93,11 @@ def cross_track(run):
         (ax, ay), (bx, by) = w[k][:2], w[k + 1][:2]
         vx, vy = bx - ax, by - ay
         length2 = vx * vx + vy * vy
+        hop = []
         for x, y in (q[:2] for q in p[(ends[k - 1] if k else 0) : end]):
             t = 0.0 if length2 == 0 else max(0.0, min(1.0, ((x - ax) * vx + (y - ay) * vy) / length2))
-            out.append(math.hypot(x - ax - t * vx, y - ay - t * vy))
+            hop.append(math.hypot(x - ax - t * vx, y - ay - t * vy))
+        out.append(hop)
     return out
 
 
