@@ -327,6 +327,9 @@ fn train<'py>(
                 Err(TrainError::StoppedInController { update, .. }) => {
                     format!("the general controller at update {update}")
                 }
+                Err(TrainError::StoppedInPretraining { candidates, .. }) => {
+                    format!("planner pre-training after candidate {candidates}")
+                }
                 Err(e) => return Err(PyRuntimeError::new_err(e.to_string())),
             };
             return Err(PyKeyboardInterrupt::new_err(format!(

@@ -157,6 +157,9 @@ fn crm_trains_with_a_machine_file_resumes_and_evaluates() {
         dhrm,
     ]);
     assert!(o.status.success() && text(&o.stdout).contains("trained dhrm"), "{}", text(&o.stderr));
+    // Regression: its log lines said "crm" (the run kind CRM and DHRM share).
+    let log = text(&o.stderr);
+    assert!(log.lines().any(|l| l.starts_with("dhrm ")) && !log.contains("crm "), "{log}");
     let o = schrl(&["baseline", "eval", "--ckpt", dhrm, "--groups", "1", "--per-group", "10"]);
     assert!(o.status.success() && text(&o.stdout).contains("satisfaction: "), "{}", text(&o.stderr));
 }

@@ -420,7 +420,9 @@ fn train_flat<B: FlatBaseline>(args: &TrainArgs) -> Result<()> {
         MetricsLog::open(&run, resumed, |m: &B::Metrics| m.summary().env_steps <= steps_done)
             .map_err(super::store_error)?;
     let (done, total) = trainer.progress();
-    let mut bar = LoggedBar::new(total, B::KIND.name(), B::UNIT);
+    // The algorithm, not the run kind: CRM and DHRM share one kind.
+    let label = clap::ValueEnum::to_possible_value(&args.algo).map(|v| v.get_name().to_owned());
+    let mut bar = LoggedBar::new(total, label.as_deref().unwrap_or(B::KIND.name()), B::UNIT);
     bar.start_at(done);
     let mut interrupted = false;
     let save_every = trainer.settings().budget().2.to_owned();

@@ -562,6 +562,10 @@ pub(crate) fn train_error(e: TrainError) -> anyhow::Error {
             let run = dir.parent().unwrap_or(&dir);
             crate::interrupt::stopped(run, format!("the general controller at update {update}"))
         }
+        TrainError::StoppedInPretraining { candidates, dir } => {
+            let run = dir.parent().unwrap_or(&dir);
+            crate::interrupt::stopped(run, format!("planner pre-training after candidate {candidates}"))
+        }
         TrainError::Setting(e) => flag_error(e),
         TrainError::Store(e) => super::store_error(e),
         TrainError::ControllerRobot { dir, found, wanted } => {

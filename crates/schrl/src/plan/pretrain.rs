@@ -181,7 +181,8 @@ pub struct PretrainProgress {
 }
 
 /// One trained candidate, as validated.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CandidateScore {
     /// Fraction of validation starts whose mean path satisfies the spec.
     pub satisfaction: f64,
@@ -210,6 +211,52 @@ pub struct Pretrained {
     pub candidates: Vec<CandidateScore>,
 }
 
+/// Where pre-training stands after a candidate: enough to go on exactly. Each
+/// candidate's training depends only on its round and its index (its seed is
+/// derived from the run's), so a run that goes on from here trains the candidates
+/// that follow as a run never stopped would have.
+#[derive(Default)]
+pub struct PretrainState {
+    /// Every candidate validated so far, in order.
+    pub scores: Vec<CandidateScore>,
+    /// The best candidate of the first round (the run's safe margin).
+    pub best_with_margin: Option<Candidate>,
+    /// The best candidate of the retry with the task's own clearance.
+    pub best_own: Option<Candidate>,
+}
+
+impl PretrainState {
+    /// The best candidate of the round with (or without) the safe margin.
+    fn best(&self, with_safe_margin: bool) -> &Option<Candidate> {
+        if with_safe_margin { &self.best_with_margin } else { &self.best_own }
+    }
+}
+
+/// What [`pretrain_from`] tells its caller as it goes.
+pub trait PretrainObserver {
+    /// What [`PretrainObserver::candidate`] may fail with.
+    type Error: From<candle_core::Error>;
+    /// Called after every update.
+    fn update(&mut self, progress: PretrainProgress);
+    /// Called after each candidate of the rounds is validated and kept or dropped
+    /// (not after the guided one, the last step): where to checkpoint. An error
+    /// (a failed save, a stop request) ends pre-training with it.
+    fn candidate(&mut self, state: &PretrainState) -> Result<(), Self::Error>;
+}
+
+/// An observer that only shows progress.
+struct ProgressOnly<'a>(&'a mut dyn FnMut(PretrainProgress));
+
+impl PretrainObserver for ProgressOnly<'_> {
+    type Error = candle_core::Error;
+    fn update(&mut self, progress: PretrainProgress) {
+        (self.0)(progress)
+    }
+    fn candidate(&mut self, _: &PretrainState) -> candle_core::Result<()> {
+        Ok(())
+    }
+}
+
 /// Pre-trains `t`'s planner (module docs) and installs the kept one. `progress` is
 /// called after every update. `None` when no candidate trained (`updates` 0).
 pub fn pretrain(
@@ -217,39 +264,49 @@ pub fn pretrain(
     cfg: &PretrainConfig,
     progress: &mut dyn FnMut(PretrainProgress),
 ) -> candle_core::Result<Option<Pretrained>> {
+    pretrain_from(t, cfg, PretrainState::default(), &mut ProgressOnly(progress))
+}
+
+/// [`pretrain`], going on from `state` (saved by an earlier call's `observer`, for
+/// the same `t` and `cfg`; [`PretrainState::default`] to start), telling
+/// `observer` after every update and every candidate.
+pub fn pretrain_from<O: PretrainObserver>(
+    t: &mut JointTrainer,
+    cfg: &PretrainConfig,
+    mut state: PretrainState,
+    observer: &mut O,
+) -> Result<Option<Pretrained>, O::Error> {
     if cfg.updates == 0 {
         return Ok(None);
     }
     let sat_of = |c: &Option<Candidate>| c.as_ref().map_or(0.0, |c| c.satisfaction);
-    // The turn margin is the joint phase's (here and in the fallbacks below): the
-    // search does not find plans with it (Doggo Seq seed 0, 0.5 m: none of 30
-    // candidates), the constrained updates move a found plan's turns out.
-    let widened = t.plan.task().with_turn_margin(0.0);
     let base = *t.plan.config();
-    let mut scores = vec![];
-    let mut best = best_candidate(&base, &widened, cfg, progress, &mut |c| scores.push(c))?;
+    best_candidate(&base, &candidate_task(t, true)?, cfg, &mut state, true, observer)?;
     let mut dropped = false;
-    let retried = sat_of(&best) < SATISFYING && t.config.safe_margin > 0.0;
+    let retried = sat_of(&state.best_with_margin) < SATISFYING && t.config.safe_margin > 0.0;
     if retried {
-        let own = planned(t, false)?.with_turn_margin(0.0);
-        let fallback = best_candidate(&base, &own, cfg, progress, &mut |c| {
-            scores.push(CandidateScore { with_safe_margin: false, ..c })
-        })?;
-        if sat_of(&fallback) > sat_of(&best) {
-            best = fallback;
-            t.config.safe_margin = 0.0;
-            dropped = true;
-        }
+        best_candidate(&base, &candidate_task(t, false)?, cfg, &mut state, false, observer)?;
+    }
+    let PretrainState { mut scores, best_with_margin: mut best, best_own } = state;
+    if sat_of(&best_own) > sat_of(&best) {
+        best = best_own;
+        t.config.safe_margin = 0.0;
+        dropped = true;
     }
     let mut guided = false;
     if cfg.guide && sat_of(&best) < FOUND {
         // On the task the last candidates planned for: the safe margin was dropped
         // for it, or there is none.
-        let own = planned(t, false)?.with_turn_margin(0.0);
+        let own = candidate_task(t, false)?;
         let done = scores.len() * cfg.updates;
         let candidate = scores.len() + 1;
         let g = guided_candidate(&base, &own, cfg, &GUIDE, &mut |i, satisfaction| {
-            progress(PretrainProgress { done: done + i, total: done + cfg.updates, candidate, satisfaction })
+            observer.update(PretrainProgress {
+                done: done + i,
+                total: done + cfg.updates,
+                candidate,
+                satisfaction,
+            })
         })?;
         if let Some(g) = g {
             scores.push(CandidateScore {
@@ -287,29 +344,45 @@ pub fn pretrain(
     }))
 }
 
-struct Candidate {
-    trainer: PlanTrainer,
-    satisfaction: f64,
-    length: f64,
+/// A trained candidate and its validation.
+pub struct Candidate {
+    /// Its trainer, as after validation.
+    pub trainer: PlanTrainer,
+    /// Fraction of validation starts whose mean path satisfies the spec.
+    pub satisfaction: f64,
+    /// Mean length of those paths (metres).
+    pub length: f64,
 }
 
-/// The candidates of [`pretrain`] for `task`, and the one kept; `scored` hears each
-/// candidate's validation.
+/// The task the candidates of a round plan for (with the run's safe margin, or with
+/// the task's own clearance): the turn margin is the joint phase's, not theirs (the
+/// search does not find plans with it, Doggo Seq seed 0, 0.5 m: none of 30
+/// candidates; the constrained updates move a found plan's turns out).
+pub fn candidate_task(t: &JointTrainer, with_safe_margin: bool) -> candle_core::Result<Task> {
+    let task = if with_safe_margin { t.plan.task().clone() } else { planned(t, false)? };
+    Ok(task.with_turn_margin(0.0))
+}
+
 /// The task `t`'s planner plans for ([`crate::run::joint::JointConfig::planned_task`]).
 fn planned(t: &JointTrainer, with_safe_margin: bool) -> candle_core::Result<Task> {
     t.config.planned_task(&t.task, with_safe_margin).map_err(|e| candle_core::Error::Msg(e.to_string()))
 }
 
-fn best_candidate(
+/// Trains the candidates of one round of [`pretrain`] on `task` (the round with the
+/// safe margin, or the retry), going on after those `state` already scored, and
+/// keeps the round's best in `state`; `observer` hears each update and each
+/// candidate.
+fn best_candidate<O: PretrainObserver>(
     base: &CpgConfig,
     task: &Task,
     cfg: &PretrainConfig,
-    progress: &mut dyn FnMut(PretrainProgress),
-    scored: &mut dyn FnMut(CandidateScore),
-) -> candle_core::Result<Option<Candidate>> {
-    let mut best: Option<Candidate> = None;
-    for k in 0..cfg.candidates * FIND_ROUNDS {
-        let best_sat = best.as_ref().map_or(0.0, |c| c.satisfaction);
+    state: &mut PretrainState,
+    with_safe_margin: bool,
+    observer: &mut O,
+) -> Result<(), O::Error> {
+    let done = state.scores.iter().filter(|c| c.with_safe_margin == with_safe_margin).count();
+    for k in done..cfg.candidates * FIND_ROUNDS {
+        let best_sat = state.best(with_safe_margin).as_ref().map_or(0.0, |c| c.satisfaction);
         if (k >= cfg.candidates && best_sat >= SATISFYING)
             || (k >= cfg.candidates * EXTRA_ROUNDS && best_sat >= FOUND)
         {
@@ -319,21 +392,31 @@ fn best_candidate(
         let mut plan = PlanTrainer::new(task.clone(), seeded)?;
         let total = cfg.updates * (k + 1).max(cfg.candidates);
         train_candidate(&mut plan, task, cfg, &mut |i, satisfaction| {
-            progress(PretrainProgress { done: k * cfg.updates + i, total, candidate: k + 1, satisfaction })
+            observer.update(PretrainProgress {
+                done: k * cfg.updates + i,
+                total,
+                candidate: k + 1,
+                satisfaction,
+            })
         })?;
         let (satisfaction, length) =
             (plan.mean_satisfaction(VALIDATION_STARTS)?, plan.mean_path_length(VALIDATION_STARTS)?);
-        scored(CandidateScore { satisfaction, length, with_safe_margin: true });
-        let better = match &best {
+        state.scores.push(CandidateScore { satisfaction, length, with_safe_margin });
+        let better = match state.best(with_safe_margin) {
             None => true,
             Some(b) if satisfaction >= SATISFYING && b.satisfaction >= SATISFYING => length < b.length,
             Some(b) => satisfaction > b.satisfaction,
         };
         if better {
-            best = Some(Candidate { trainer: plan, satisfaction, length });
+            let kept = Some(Candidate { trainer: plan, satisfaction, length });
+            match with_safe_margin {
+                true => state.best_with_margin = kept,
+                false => state.best_own = kept,
+            }
         }
+        observer.candidate(state)?;
     }
-    Ok(best)
+    Ok(())
 }
 
 /// The guided candidate (module docs) for `task`, `None` when the gradient planner

@@ -37,6 +37,7 @@ mod lines;
 mod metrics;
 pub mod plan_file;
 pub mod planner;
+pub mod pretrain;
 pub mod sdf;
 pub mod tltl;
 
@@ -74,6 +75,9 @@ pub enum RunKind {
     /// `schrl baseline train --algo crm` or `--algo dhrm`: a flat policy (DHRM: options
     /// under a meta-controller) trained on a reward machine.
     Crm,
+    /// `schrl train`'s planner pre-training between candidates, in its run's
+    /// `pretrain/` ([`pretrain::PRETRAIN`]).
+    Pretrain,
 }
 
 impl RunKind {
@@ -85,6 +89,7 @@ impl RunKind {
             RunKind::Joint => "joint",
             RunKind::Tltl => "tltl",
             RunKind::Crm => "crm",
+            RunKind::Pretrain => "pretrain",
         }
     }
 
@@ -96,6 +101,7 @@ impl RunKind {
             RunKind::Joint => "schrl train",
             RunKind::Tltl => "schrl baseline train --algo tltl",
             RunKind::Crm => "schrl baseline train --algo crm|dhrm",
+            RunKind::Pretrain => "schrl train",
         }
     }
 }

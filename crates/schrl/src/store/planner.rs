@@ -144,7 +144,17 @@ pub(crate) fn restore_trainer(
     trainer: &mut PlanTrainer,
     state: PlanTrainerState,
 ) -> Result<(), StoreError> {
-    let weights = ckpt.file(WEIGHTS)?;
+    restore_named(ckpt, WEIGHTS, trainer, state)
+}
+
+/// Loads the weights of `ckpt`'s file `name` into `trainer` and restores its `state`.
+pub(crate) fn restore_named(
+    ckpt: &Checkpoint,
+    name: &str,
+    trainer: &mut PlanTrainer,
+    state: PlanTrainerState,
+) -> Result<(), StoreError> {
+    let weights = ckpt.file(name)?;
     trainer.load_weights(&weights).map_err(|e| invalid(&weights, e.to_string()))?;
     check_finite(trainer.varmap(), &weights)?;
     trainer.restore_state(state).map_err(|e| invalid(&weights, e.to_string()))

@@ -4,7 +4,8 @@
 //! The stages, in order: the warm-start controller (a given `schrl control train` run,
 //! or a general controller trained into the run's `general/` by [`controller`], with
 //! its own checkpoints, reused when finished there and continued when not),
-//! pre-training of the planner on the spec (the first checkpoint), the joint
+//! pre-training of the planner on the spec (saved in the run's `pretrain/` after each
+//! candidate, continued from there when cut off; then the first checkpoint), the joint
 //! phase ([`JointTrainer::iterate`], a checkpoint every `save_every` iterations and at
 //! the end, one metrics line per iteration) until the step budget or the target, then
 //! the training curve and, with `eval_groups > 0`, the evaluation of the mean plans
@@ -21,7 +22,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::control::ControlMetrics;
-use crate::plan::pretrain::{PretrainProgress, pretrain};
+use crate::plan::pretrain::{PretrainObserver, PretrainProgress, PretrainState, pretrain_from};
 use crate::run::RunError;
 use crate::run::evaluate::{EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task};
 use crate::run::joint::{JointMetrics, JointRunSettings, JointTrainer, SettingError};
@@ -55,6 +56,15 @@ pub enum TrainError {
         /// Updates saved.
         update: usize,
         /// The controller's run directory (the run's `general/`).
+        dir: PathBuf,
+    },
+    /// The watcher asked to stop while the planner pre-trained; saved after the last
+    /// candidate, and a resumed run goes on with the next.
+    #[error("stopped while pre-training the planner; saved after candidate {candidates} in {dir}")]
+    StoppedInPretraining {
+        /// Candidates saved.
+        candidates: usize,
+        /// Pre-training's directory (the run's `pretrain/`).
         dir: PathBuf,
     },
     /// The warm-start controller drives another robot.
@@ -180,11 +190,13 @@ impl RunSession {
         settings.validate()?;
         let notes = settings.task()?.warnings().into_iter().map(|w| format!("warning: {w}")).collect();
         let run = RunWriter::create(dir, RunKind::Joint, &settings, existing)?;
-        // A replaced run's best checkpoint goes with it.
-        let best = dir.join(store::joint::BEST);
-        if best.exists() {
-            std::fs::remove_dir_all(&best)
-                .map_err(|e| StoreError::Io { path: best.clone(), message: e.to_string() })?;
+        // A replaced run's best checkpoint and pre-training go with it.
+        for sub in [store::joint::BEST, store::pretrain::PRETRAIN] {
+            let path = dir.join(sub);
+            if path.exists() {
+                std::fs::remove_dir_all(&path)
+                    .map_err(|e| StoreError::Io { path: path.clone(), message: e.to_string() })?;
+            }
         }
         Ok(Self { run, settings, saved: None, selection: None, notes })
     }
@@ -407,7 +419,16 @@ fn first_checkpoint(
         None => controller::general_controller(s.robot, s.seed, &run.dir().join("general"), watcher)?,
     };
     let mut t = JointTrainer::new(task, s.joint.clone(), s.cpg, control)?;
-    let kept = pretrain(&mut t, &s.pretrain, &mut |p| watcher.progress(Progress::Pretrain(p)))?;
+    let dir = run.dir().join(store::pretrain::PRETRAIN);
+    let (writer, from) = pretraining_in(&dir, s, &t)?;
+    if !from.scores.is_empty() {
+        watcher.note(&format!(
+            "planner pre-training: going on after candidate {} ({})",
+            from.scores.len(),
+            dir.display()
+        ));
+    }
+    let kept = pretrain_from(&mut t, &s.pretrain, from, &mut Pretraining { writer, watcher: &mut *watcher })?;
     if let Some(k) = kept {
         for (margin, label) in [
             (true, format!("with {} m more clearance", s.joint.safe_margin)),
@@ -447,6 +468,57 @@ fn first_checkpoint(
     }
     run.save(|f| store::joint::save_into(f, &t))?;
     Ok(t)
+}
+
+/// Pre-training's directory `dir` of a run of `s` (trainer `t`, fresh) and where it
+/// stands: saved there by this run, or a new one (another run's is replaced).
+fn pretraining_in(
+    dir: &Path,
+    s: &JointRunSettings,
+    t: &JointTrainer,
+) -> Result<(RunWriter, PretrainState), TrainError> {
+    if dir.join(store::MANIFEST).exists() {
+        let (writer, ckpt) = RunWriter::resume(dir, RunKind::Pretrain)?;
+        let saved: JointRunSettings = writer.settings()?;
+        // What a resumed run may change (`ResumeChanges`) does not reach pre-training.
+        let comparable = JointRunSettings {
+            steps: s.steps,
+            target: s.target,
+            eval_groups: s.eval_groups,
+            save_every: s.save_every,
+            ..saved
+        };
+        if comparable == *s {
+            let state =
+                if ckpt.has_files() { store::pretrain::load_from(&ckpt, t)? } else { Default::default() };
+            return Ok((writer, state));
+        }
+    }
+    Ok((RunWriter::create(dir, RunKind::Pretrain, s, Existing::Replace)?, PretrainState::default()))
+}
+
+/// Pre-training as a run watches it: progress to the watcher, a save after each
+/// candidate, then a stop if the watcher asks.
+struct Pretraining<'a> {
+    writer: RunWriter,
+    watcher: &'a mut dyn Watcher,
+}
+
+impl PretrainObserver for Pretraining<'_> {
+    type Error = TrainError;
+
+    fn update(&mut self, progress: PretrainProgress) {
+        self.watcher.progress(Progress::Pretrain(progress));
+    }
+
+    fn candidate(&mut self, state: &PretrainState) -> Result<(), TrainError> {
+        self.writer.save(|f| store::pretrain::save_into(f, state))?;
+        if self.watcher.stop_requested() {
+            let dir = self.writer.dir().to_path_buf();
+            return Err(TrainError::StoppedInPretraining { candidates: state.scores.len(), dir });
+        }
+        Ok(())
+    }
 }
 
 /// Satisfaction of executed runs and of planned paths (0–1) on top, the mean
@@ -524,6 +596,78 @@ mod tests {
 
     fn settings() -> JointRunSettings {
         JointRunSettings::for_task(&Task::point(TaskKind::Seq), 3).unwrap()
+    }
+
+    /// A watcher that asks to stop once pre-training's candidate `stop_at` has
+    /// started (never with `None`), counting pre-training updates.
+    #[derive(Default)]
+    struct StopInPretraining {
+        stop_at: Option<usize>,
+        candidate: usize,
+        updates: usize,
+        notes: Vec<String>,
+    }
+
+    impl Watcher for StopInPretraining {
+        fn progress(&mut self, p: Progress<'_>) {
+            if let Progress::Pretrain(p) = p {
+                (self.candidate, self.updates) = (p.candidate, self.updates + 1);
+            }
+        }
+        fn note(&mut self, note: &str) {
+            self.notes.push(note.to_string());
+        }
+        fn stop_requested(&mut self) -> bool {
+            self.stop_at.is_some_and(|n| self.candidate >= n)
+        }
+    }
+
+    /// Regression: planner pre-training had no checkpoint until it ended (Drone Signal:
+    /// ~60 candidates, ~15 minutes), so a run cut off there trained every candidate
+    /// again. Now each candidate is saved in `pretrain/`, and a resumed run goes on
+    /// with the next one and ends bit for bit where a run never stopped ends.
+    #[test]
+    fn a_run_stopped_while_pretraining_goes_on_from_its_last_candidate() {
+        use crate::control::{ControlConfig, ControlTrainer};
+        let scratch = tempfile::tempdir().unwrap();
+        let controller = scratch.path().join("controller");
+        let c = ControlConfig::for_robot(sim::Robot::Point);
+        let mut w = RunWriter::create(&controller, RunKind::Controller, &c, Existing::Refuse).unwrap();
+        w.save(|f| store::controller::save_into(f, &ControlTrainer::new(c.clone()).unwrap())).unwrap();
+        drop(w);
+        // Point Loop: two updates per candidate never find the corner cycle, so every
+        // round runs to its end: ten candidates with the safe margin, ten without.
+        let mut s = JointRunSettings::for_task(&Task::point(TaskKind::Loop), 3).unwrap();
+        s.controller = Some(controller);
+        s.pretrain =
+            crate::plan::pretrain::PretrainConfig { updates: 2, candidates: 1, guide: false, ..s.pretrain };
+        (s.steps, s.eval_groups) = (1, 0);
+        let (straight, stopped) = (scratch.path().join("straight"), scratch.path().join("stopped"));
+        let joint_files =
+            |dir: &Path| store::Checkpoint::open(dir, RunKind::Joint).unwrap().manifest().files.clone();
+
+        let mut whole = StopInPretraining::default();
+        RunSession::create(&straight, s.clone(), Existing::Refuse).unwrap().train(&mut whole).unwrap();
+        assert_eq!(whole.updates, 20 * 2, "ten candidates in each round");
+
+        let mut first = StopInPretraining { stop_at: Some(3), ..Default::default() };
+        let session = RunSession::create(&stopped, s.clone(), Existing::Refuse).unwrap();
+        match session.train(&mut first).err().expect("stopped") {
+            TrainError::StoppedInPretraining { candidates, dir } => {
+                assert_eq!((candidates, dir), (3, stopped.join(store::pretrain::PRETRAIN)))
+            }
+            e => panic!("{e}"),
+        }
+        assert!(
+            !store::Checkpoint::open(&stopped, RunKind::Joint).unwrap().has_files(),
+            "no joint checkpoint yet"
+        );
+
+        let mut rest = StopInPretraining::default();
+        RunSession::resume(&stopped).unwrap().train(&mut rest).unwrap();
+        assert_eq!(rest.updates, (20 - 3) * 2, "candidates 4 onwards, not from the first");
+        assert!(rest.notes.iter().any(|n| n.starts_with("planner pre-training: going on after candidate 3")));
+        assert_eq!(joint_files(&stopped), joint_files(&straight), "bit for bit the run that never stopped");
     }
 
     #[test]

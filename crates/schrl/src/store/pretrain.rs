@@ -1,0 +1,91 @@
+//! Planner pre-training between candidates (`DIR/pretrain/` of a `schrl train` run,
+//! [`PRETRAIN`]): `pretrain.json` (every candidate's score so far, and of each
+//! round's best candidate its settings, validation and trainer state) and each best
+//! candidate's weights (`with-margin.safetensors`, `own.safetensors`). A run cut off
+//! while pre-training goes on from the last candidate instead of from the first
+//! ([`crate::plan::pretrain::PretrainState`]).
+
+use serde::{Deserialize, Serialize};
+
+use super::{Checkpoint, SaveFiles, StoreError, invalid, planner};
+use crate::plan::cpg::{CpgConfig, PlanTrainer, PlanTrainerState};
+use crate::plan::pretrain::{Candidate, CandidateScore, PretrainState, candidate_task};
+use crate::run::joint::JointTrainer;
+
+/// The subdirectory of a joint run that holds its pre-training.
+pub const PRETRAIN: &str = "pretrain";
+
+const STATE: &str = "pretrain.json";
+
+/// The layout of `pretrain.json` this build writes and reads.
+const STATE_FORMAT: u32 = 1;
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct State {
+    format: u32,
+    scores: Vec<CandidateScore>,
+    best_with_margin: Option<Kept>,
+    best_own: Option<Kept>,
+}
+
+/// A round's best candidate, less its weights.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Kept {
+    cpg: CpgConfig,
+    satisfaction: f64,
+    length: f64,
+    trainer: PlanTrainerState,
+}
+
+/// The weights file of a round's best candidate.
+fn weights(with_safe_margin: bool) -> &'static str {
+    if with_safe_margin { "with-margin.safetensors" } else { "own.safetensors" }
+}
+
+/// Writes pre-training's `state` into a save.
+pub fn save_into(files: &mut SaveFiles, state: &PretrainState) -> Result<(), StoreError> {
+    let mut kept = |c: &Option<Candidate>, with_safe_margin: bool| -> Result<Option<Kept>, StoreError> {
+        let Some(c) = c else { return Ok(None) };
+        files.write_with(weights(with_safe_margin), |p| c.trainer.varmap().save(p))?;
+        Ok(Some(Kept {
+            cpg: *c.trainer.config(),
+            satisfaction: c.satisfaction,
+            length: c.length,
+            trainer: c.trainer.state(),
+        }))
+    };
+    let state = State {
+        format: STATE_FORMAT,
+        scores: state.scores.clone(),
+        best_with_margin: kept(&state.best_with_margin, true)?,
+        best_own: kept(&state.best_own, false)?,
+    };
+    files.json(STATE, &state)
+}
+
+/// The pre-training saved in `ckpt` for the fresh trainer `t` (the run's, before
+/// pre-training), its best candidates restored exactly.
+pub fn load_from(ckpt: &Checkpoint, t: &JointTrainer) -> Result<PretrainState, StoreError> {
+    let state: State = ckpt.json(STATE)?;
+    let path = ckpt.path_of(STATE);
+    if state.format != STATE_FORMAT {
+        return Err(invalid(
+            &path,
+            format!("format {} is not {STATE_FORMAT}, the pre-training state this schrl reads", state.format),
+        ));
+    }
+    let restore = |kept: Option<Kept>, with_safe_margin: bool| -> Result<Option<Candidate>, StoreError> {
+        let Some(k) = kept else { return Ok(None) };
+        let task = candidate_task(t, with_safe_margin).map_err(|e| invalid(&path, e.to_string()))?;
+        let mut trainer = PlanTrainer::new(task, k.cpg).map_err(|e| invalid(&path, e.to_string()))?;
+        planner::restore_named(ckpt, weights(with_safe_margin), &mut trainer, k.trainer)?;
+        Ok(Some(Candidate { trainer, satisfaction: k.satisfaction, length: k.length }))
+    };
+    Ok(PretrainState {
+        scores: state.scores,
+        best_with_margin: restore(state.best_with_margin, true)?,
+        best_own: restore(state.best_own, false)?,
+    })
+}
