@@ -13,7 +13,9 @@ Reads the file `schrl eval --trajectories FILE.jsonl` writes (one run per line, 
 - how far the robot strays from the straight segment it is driving (from the waypoint
   it last reached, or its start, to the next): the cross-track distance at every step,
   median, 90th and 99th percentile, and the largest of each hop's (one per waypoint
-  driven to). A planner's clearance must cover this;
+  driven to). A planner's clearance must cover this. And the same by how far along
+  its segment the robot is, in 0.5 m bins, over hops of 3 m or more: whether a robot
+  strays most after a turn or the farther it walks;
 - where the runs that collided or fell ended: the hop, how many steps after the last
   waypoint reached, and how far from the segment then.
 
@@ -30,12 +32,16 @@ import sys
 
 def main(path):
     runs = [json.loads(line) for line in open(path)]
-    net50, along, across, facing, off_segment, hop_max = [], [], [], [0] * 6, [], []
+    net50, along, across, facing, off_segment, hop_max, by_along = [], [], [], [0] * 6, [], [], {}
     for run in runs:
         p, yaw = run["positions"], run["headings"]
         hops = cross_track(run)
-        off_segment += [d for hop in hops for d in hop]
-        hop_max += [max(hop) for hop in hops if hop]
+        off_segment += [d for hop in hops for _, d in hop]
+        hop_max += [max(d for _, d in hop) for hop in hops if hop]
+        for hop, length in zip(hops, hop_lengths(run)):
+            if length >= 3.0:
+                for a, d in hop:
+                    by_along.setdefault(max(-1, min(math.floor(a / 0.5), 9)), []).append(d)
         for i in range(0, len(p) - 50, 50):
             net50.append(math.dist(p[i][:2], p[i + 50][:2]) / 50)
         for i in range(5, len(p) - 6):
@@ -67,6 +73,14 @@ def main(path):
             f"largest of each of {len(hop_max)} hops: median {h(0.5):.3f} m, 90th percentile {h(0.9):.3f} m, "
             f"99th {h(0.99):.3f} m"
         )
+    if by_along:
+        print("off the segment by distance along it, hops of 3 m or more (m: median, 90th, 99th percentile):")
+        for k, ds in sorted(by_along.items()):
+            ds.sort()
+            q = lambda f: ds[int(f * (len(ds) - 1))]
+            lo = "before" if k < 0 else f"{0.5 * k:.1f}"
+            hi = "" if k < 0 else ("+" if k == 9 else f"-{0.5 * k + 0.5:.1f}")
+            print(f"  {lo}{hi}: {q(0.5):.3f} {q(0.9):.3f} {q(0.99):.3f} ({len(ds)} steps)")
     for run in runs:
         if run["outcome"] not in ("collided", "fell"):
             continue
@@ -74,15 +88,22 @@ def main(path):
         reached = len(run["reached_at"])
         since = len(run["positions"]) - (run["reached_at"][-1] if reached else 0)
         x, y = run["positions"][-1][:2]
-        off = hops[-1][-1] if hops and hops[-1] else float("nan")
+        along, off = hops[-1][-1] if hops and hops[-1] else (float("nan"), float("nan"))
         print(
             f"{run['outcome']} at ({x:.2f}, {y:.2f}) driving to waypoint {reached + 1}, "
-            f"{since} steps after the last reached, {off:.2f} m off the segment"
+            f"{since} steps after the last reached, {along:.2f} m along the segment and {off:.2f} m off it"
         )
 
 
+def hop_lengths(run):
+    """The length of each planned segment, in the order of `cross_track`'s hops."""
+    w = run["waypoints"]
+    return [math.dist(a[:2], b[:2]) for a, b in zip(w, w[1:])]
+
+
 def cross_track(run):
-    """Per hop, the distances from each position to the segment the robot is driving then."""
+    """Per hop, for each position: how far along the segment the robot is driving then
+    (metres from its first waypoint, projected) and its distance from the segment."""
     p, w = run["positions"], run["waypoints"]
     # waypoints[0] is the start; reached_at[k] is the step waypoint k + 1 was reached.
     ends = run["reached_at"] + [len(p)]
@@ -96,7 +117,8 @@ def cross_track(run):
         hop = []
         for x, y in (q[:2] for q in p[(ends[k - 1] if k else 0) : end]):
             t = 0.0 if length2 == 0 else max(0.0, min(1.0, ((x - ax) * vx + (y - ay) * vy) / length2))
-            hop.append(math.hypot(x - ax - t * vx, y - ay - t * vy))
+            along = ((x - ax) * vx + (y - ay) * vy) / math.sqrt(length2) if length2 else 0.0
+            hop.append((along, math.hypot(x - ax - t * vx, y - ay - t * vy)))
         out.append(hop)
     return out
 
