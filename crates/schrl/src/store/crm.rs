@@ -12,7 +12,7 @@ use candle_core::{DType, Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::{Checkpoint, RunKind, SaveFiles, StoreError, invalid};
+use super::{Checkpoint, RunKind, SaveFiles, StoreError, check_format, invalid};
 use crate::baseline::crm::{CrmSettings, CrmTrainer};
 use crate::baseline::dhrm::OptionRun;
 use crate::baseline::replay::ReplayBuffer;
@@ -143,12 +143,7 @@ pub fn save_into(files: &mut SaveFiles, t: &CrmTrainer) -> Result<(), StoreError
 pub fn load_from(ckpt: &Checkpoint) -> Result<CrmTrainer, StoreError> {
     let state: State = ckpt.json(STATE)?;
     let path = ckpt.path_of(STATE);
-    if state.format != STATE_FORMAT {
-        return Err(invalid(
-            &path,
-            format!("format {} is not {STATE_FORMAT}, the CRM state this schrl reads", state.format),
-        ));
-    }
+    check_format(&path, state.format, STATE_FORMAT, "the CRM state")?;
     // A fresh trainer gives the shapes every saved tensor must have.
     let fresh = CrmTrainer::new(state.settings.clone()).map_err(|e| invalid(&path, e.to_string()))?;
     let weights = ckpt.file(WEIGHTS)?;

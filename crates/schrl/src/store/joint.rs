@@ -19,7 +19,7 @@ use candle_core::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::{Checkpoint, RunKind, SaveFiles, StoreError, controller, invalid, planner};
+use super::{Checkpoint, RunKind, SaveFiles, StoreError, check_format, controller, invalid, planner};
 use crate::control::normalize::RewardScaler;
 use crate::control::ppo::RolloutBuffer;
 use crate::plan::cpg::{CpgConfig, PlanTrainerState};
@@ -93,12 +93,7 @@ pub fn save_into(files: &mut SaveFiles, t: &JointTrainer) -> Result<(), StoreErr
 pub fn load_from(ckpt: &Checkpoint) -> Result<JointTrainer, StoreError> {
     let state: State = ckpt.json(STATE)?;
     let path = ckpt.path_of(STATE);
-    if state.format != STATE_FORMAT {
-        return Err(invalid(
-            &path,
-            format!("format {} is not {STATE_FORMAT}, the joint-run state this schrl reads", state.format),
-        ));
-    }
+    check_format(&path, state.format, STATE_FORMAT, "the joint-run state")?;
     let task = Task::from_texts(&path, &state.task_toml, &path, &state.task_spec)
         .map_err(|e| invalid(&path, format!("task: {}", e.message)))?;
     let control = controller::load_from(ckpt)?;

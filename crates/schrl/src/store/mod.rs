@@ -249,6 +249,15 @@ pub(crate) fn save_file(path: &Path, contents: &[u8], force: bool) -> Result<(),
     write_atomic(path, contents)
 }
 
+/// Refuses a state file (`path`) of another layout than this build's: `found` is the
+/// file's `format`, `wanted` the one this build reads, `what` what the file holds.
+pub(crate) fn check_format(path: &Path, found: u32, wanted: u32, what: &str) -> Result<(), StoreError> {
+    if found == wanted {
+        return Ok(());
+    }
+    Err(invalid(path, format!("format {found} is not {wanted}, {what} this schrl reads")))
+}
+
 /// Writes `path` through a temporary sibling, synced, then renamed over it.
 pub fn write_atomic(path: &Path, contents: &[u8]) -> Result<(), StoreError> {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();

@@ -7,7 +7,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Checkpoint, SaveFiles, StoreError, invalid, planner};
+use super::{Checkpoint, SaveFiles, StoreError, check_format, invalid, planner};
 use crate::plan::cpg::{CpgConfig, PlanTrainer, PlanTrainerState};
 use crate::plan::pretrain::{Candidate, CandidateScore, PretrainState, candidate_task};
 use crate::run::joint::JointTrainer;
@@ -70,12 +70,7 @@ pub fn save_into(files: &mut SaveFiles, state: &PretrainState) -> Result<(), Sto
 pub fn load_from(ckpt: &Checkpoint, t: &JointTrainer) -> Result<PretrainState, StoreError> {
     let state: State = ckpt.json(STATE)?;
     let path = ckpt.path_of(STATE);
-    if state.format != STATE_FORMAT {
-        return Err(invalid(
-            &path,
-            format!("format {} is not {STATE_FORMAT}, the pre-training state this schrl reads", state.format),
-        ));
-    }
+    check_format(&path, state.format, STATE_FORMAT, "the pre-training state")?;
     let restore = |kept: Option<Kept>, with_safe_margin: bool| -> Result<Option<Candidate>, StoreError> {
         let Some(k) = kept else { return Ok(None) };
         let task = candidate_task(t, with_safe_margin).map_err(|e| invalid(&path, e.to_string()))?;

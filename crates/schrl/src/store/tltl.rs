@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::controller::{load_weights, save_weights};
-use super::{Checkpoint, RunKind, SaveFiles, StoreError, invalid};
+use super::{Checkpoint, RunKind, SaveFiles, StoreError, check_format, invalid};
 use crate::baseline::tltl::{TltlSettings, TltlTrainer};
 use crate::control::normalize::{RewardScaler, RunningMeanStd};
 
@@ -61,12 +61,7 @@ pub fn save_into(files: &mut SaveFiles, t: &TltlTrainer) -> Result<(), StoreErro
 pub fn load_from(ckpt: &Checkpoint) -> Result<TltlTrainer, StoreError> {
     let state: State = ckpt.json(STATE)?;
     let path = ckpt.path_of(STATE);
-    if state.format != STATE_FORMAT {
-        return Err(invalid(
-            &path,
-            format!("format {} is not {STATE_FORMAT}, the TLTL state this schrl reads", state.format),
-        ));
-    }
+    check_format(&path, state.format, STATE_FORMAT, "the TLTL state")?;
     state.settings.ppo.validate().map_err(|e| invalid(&path, e))?;
     let (policy, learner) =
         load_weights(ckpt, (state.obs_dim, state.act_dim), &state.settings.ppo, state.adam_t)?;
