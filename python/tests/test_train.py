@@ -124,3 +124,20 @@ def test_ctrl_c_saves_and_says_how_to_continue(general, tmp_path):
     with pytest.raises(KeyboardInterrupt, match="continue with resume=True"):
         train(tmp_path / "run", general, progress=interrupt)
     assert schrl.train(out=str(tmp_path / "run"), resume=True)["stop"] == "steps"
+
+
+def test_a_run_stopped_while_pretraining_goes_on_from_its_last_candidate(general, tmp_path):
+    out = tmp_path / "run"
+
+    def stop_in_pretraining(event):
+        if event["stage"] == "pretrain":
+            raise RuntimeError("enough")
+
+    with pytest.raises(RuntimeError, match="enough"):
+        train(out, general, progress=stop_in_pretraining)
+    # Saved after the candidate in training, before any joint checkpoint.
+    assert (out / "pretrain" / "manifest.json").exists()
+    assert json.loads((out / "manifest.json").read_text())["generation"] is None
+    resumed = schrl.train(out=str(out), resume=True)
+    whole = train(tmp_path / "whole", general)
+    assert resumed["history"] == whole["history"]
