@@ -16,6 +16,10 @@ Reads the file `schrl eval --trajectories FILE.jsonl` writes (one run per line, 
   driven to). A planner's clearance must cover this. And the same by how far along
   its segment the robot is, in 0.5 m bins, over hops of 3 m or more: whether a robot
   strays most after a turn or the farther it walks;
+- the first hop by how the robot starts facing it (the angle between its heading and
+  the direction to the first waypoint): runs, and how many failed before reaching it
+  (a planner that does not see the start heading plans the same first waypoint
+  either way);
 - where the runs that collided or fell ended: the hop, how many steps after the last
   waypoint reached, and how far from the segment then.
 
@@ -81,6 +85,12 @@ def main(path):
             lo = "before" if k < 0 else f"{0.5 * k:.1f}"
             hi = "" if k < 0 else ("+" if k == 9 else f"-{0.5 * k + 0.5:.1f}")
             print(f"  {lo}{hi}: {q(0.5):.3f} {q(0.9):.3f} {q(0.99):.3f} ({len(ds)} steps)")
+    print("first hop by the start heading's angle to it: runs, failed before reaching it (collisions)")
+    for lo, hi in ((0, 60), (60, 110), (110, 181)):
+        sel = [r for r in runs if lo <= start_angle(r) < hi]
+        failed = [r for r in sel if r["outcome"] != "satisfied" and not r["reached_at"]]
+        collided = sum(r["outcome"] == "collided" for r in failed)
+        print(f"  {lo}-{min(hi, 180)}°: {len(sel)}, {len(failed)} ({collided})")
     for run in runs:
         if run["outcome"] not in ("collided", "fell"):
             continue
@@ -93,6 +103,13 @@ def main(path):
             f"{run['outcome']} at ({x:.2f}, {y:.2f}) driving to waypoint {reached + 1}, "
             f"{since} steps after the last reached, {along:.2f} m along the segment and {off:.2f} m off it"
         )
+
+
+def start_angle(run):
+    """Degrees between the start heading and the direction to the first waypoint."""
+    (ax, ay), (bx, by) = run["waypoints"][0][:2], run["waypoints"][1][:2]
+    off = math.atan2(by - ay, bx - ax) - run["headings"][0]
+    return abs(math.degrees((off + math.pi) % (2 * math.pi) - math.pi))
 
 
 def hop_lengths(run):
