@@ -178,5 +178,10 @@ fn check_finite(varmap: &VarMap, weights: &Path) -> Result<(), StoreError> {
 
 /// Writes the planner weights alone (a joint run keeps the state in its own file).
 pub(crate) fn save_weights(files: &mut SaveFiles, trainer: &PlanTrainer) -> Result<(), StoreError> {
-    files.write_with(WEIGHTS, |p| trainer.varmap().save(p))
+    save_named(files, WEIGHTS, trainer)
+}
+
+/// Writes `trainer`'s weights into the save's file `name` (read by [`restore_named`]).
+pub(crate) fn save_named(files: &mut SaveFiles, name: &str, trainer: &PlanTrainer) -> Result<(), StoreError> {
+    files.write_with(name, |p| trainer.varmap().save(p))
 }

@@ -48,7 +48,7 @@ fn weights(with_safe_margin: bool) -> &'static str {
 pub fn save_into(files: &mut SaveFiles, state: &PretrainState) -> Result<(), StoreError> {
     let mut kept = |c: &Option<Candidate>, with_safe_margin: bool| -> Result<Option<Kept>, StoreError> {
         let Some(c) = c else { return Ok(None) };
-        files.write_with(weights(with_safe_margin), |p| c.trainer.varmap().save(p))?;
+        planner::save_named(files, weights(with_safe_margin), &c.trainer)?;
         Ok(Some(Kept {
             cpg: *c.trainer.config(),
             satisfaction: c.satisfaction,

@@ -173,6 +173,29 @@ pub struct ResumeChanges {
     pub save_every: Option<usize>,
 }
 
+impl ResumeChanges {
+    /// The changes that make a run's settings `s` (what `s` holds of each).
+    fn to(s: &JointRunSettings) -> Self {
+        Self {
+            steps: Some(s.steps),
+            target: s.target,
+            eval_groups: Some(s.eval_groups),
+            save_every: Some(s.save_every),
+        }
+    }
+
+    /// `s` with these changes.
+    fn apply(&self, s: &JointRunSettings) -> JointRunSettings {
+        JointRunSettings {
+            steps: self.steps.unwrap_or(s.steps),
+            target: self.target.or(s.target),
+            eval_groups: self.eval_groups.unwrap_or(s.eval_groups),
+            save_every: self.save_every.unwrap_or(s.save_every),
+            ..s.clone()
+        }
+    }
+}
+
 /// A run directory ready to train: a new run, or a saved one resuming from its last
 /// checkpoint (holding the directory's lock).
 pub struct RunSession {
@@ -214,13 +237,7 @@ impl RunSession {
     /// Changes what a resumed run may change (the rest of its settings are what its
     /// checkpoints were made with), recording them in the run's manifest.
     pub fn change(&mut self, c: ResumeChanges) -> Result<(), TrainError> {
-        let s = JointRunSettings {
-            steps: c.steps.unwrap_or(self.settings.steps),
-            target: c.target.or(self.settings.target),
-            eval_groups: c.eval_groups.unwrap_or(self.settings.eval_groups),
-            save_every: c.save_every.unwrap_or(self.settings.save_every),
-            ..self.settings.clone()
-        };
+        let s = c.apply(&self.settings);
         s.validate()?;
         self.run.set_settings(&s)?;
         self.settings = s;
@@ -481,14 +498,7 @@ fn pretraining_in(
         let (writer, ckpt) = RunWriter::resume(dir, RunKind::Pretrain)?;
         let saved: JointRunSettings = writer.settings()?;
         // What a resumed run may change (`ResumeChanges`) does not reach pre-training.
-        let comparable = JointRunSettings {
-            steps: s.steps,
-            target: s.target,
-            eval_groups: s.eval_groups,
-            save_every: s.save_every,
-            ..saved
-        };
-        if comparable == *s {
+        if ResumeChanges::to(s).apply(&saved) == *s {
             let state =
                 if ckpt.has_files() { store::pretrain::load_from(&ckpt, t)? } else { Default::default() };
             return Ok((writer, state));
