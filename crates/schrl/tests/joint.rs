@@ -583,16 +583,21 @@ fn anchor_penalties_have_their_gradients_and_the_length_one_is_one_sided() {
 }
 
 /// Each robot's defaults, re-derived on its own tuning seeds (README, *Car and Drone*):
-/// the Car trains 4.5 M joint steps and deploys its best validated checkpoint; Point
-/// and the Drone train 3 M and deploy their last.
+/// the Car trains 4.5 M joint steps, its planner keeps 0.2 m more clearance at the
+/// waypoints it turns at, and it deploys its best validated checkpoint; Point and the
+/// Drone train 3 M with no turn margin and deploy their last.
 #[test]
-fn the_car_trains_longer_and_selects_by_default() {
+fn the_car_trains_longer_turns_wider_and_selects_by_default() {
     use schrl::run::joint::{DEFAULT_STEPS, JointRunSettings};
-    for (robot, steps, every) in
-        [(Robot::Point, DEFAULT_STEPS, 0), (Robot::Car, 4_500_000, 250_000), (Robot::Drone, DEFAULT_STEPS, 0)]
-    {
+    for (robot, steps, turn, every) in [
+        (Robot::Point, DEFAULT_STEPS, 0.0, 0),
+        (Robot::Car, 4_500_000, 0.2, 250_000),
+        (Robot::Drone, DEFAULT_STEPS, 0.0, 0),
+    ] {
         let task = Task::builtin(robot.name(), TaskKind::Seq).unwrap();
         let s = JointRunSettings::for_task(&task, 0).unwrap();
-        assert_eq!((s.steps, s.select_every), (steps, every), "{robot:?}");
+        assert_eq!((s.steps, s.joint.turn_margin, s.select_every), (steps, turn, every), "{robot:?}");
+        let planned = s.joint.planned_task(&task, true).unwrap();
+        assert_eq!(planned.turn_margin, turn, "{robot:?}: the planner plans with it");
     }
 }

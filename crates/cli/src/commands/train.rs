@@ -150,7 +150,7 @@ pub struct TrainArgs {
     safe_margin: Option<f64>,
     /// Metres more clearance the planner keeps at each waypoint the robot turns at
     /// than along its segments (room for a robot that swings out of its turns)
-    /// [default: 0].
+    /// [default: 0; the Car's 0.2].
     #[arg(long)]
     turn_margin: Option<f64>,
     /// What the planner's `safe` measures obstacles with: exact (the map's distance)

@@ -121,8 +121,9 @@ pub struct JointConfig {
     /// Metres more clearance the planner asks at each waypoint the robot turns at
     /// than along its segments ([`Task::with_turn_margin`]), room for a robot that
     /// swings out of its turns. The joint phase's: pre-training searches without it
-    /// and the constrained updates move the kept plan's turns out. 0 (the default,
-    /// and runs saved before it existed): none.
+    /// and the constrained updates move the kept plan's turns out. 0 (this struct's
+    /// default, and runs saved before it existed): none; a run's default is its
+    /// robot's ([`default_turn_margin`]).
     #[serde(default)]
     pub turn_margin: f64,
     /// The planner's `safe` measures obstacles with this network instead of the
@@ -270,6 +271,20 @@ pub fn default_steps(robot: sim::Robot) -> usize {
     }
 }
 
+/// The planner's turn margin ([`JointConfig::turn_margin`]) by default for `robot`:
+/// the Car's 0.2 m, about its one-wheel turning radius (0.208 m, its MuJoCo twin's
+/// 0.230 m; README *Fidelity of the native Car*), the room it sweeps turning round,
+/// re-derived on its own tuning seeds 0–4 with selection and 4.5 M steps (Seq seed 1,
+/// which collided turning round at its first waypoint, 0.946 → 0.998; README *Car and
+/// Drone*); 0 for the others, whose runs were measured without it (the Doggo's gait
+/// turns wider, and a 0.5 m margin was not kept for it; README *Doggo*).
+pub fn default_turn_margin(robot: sim::Robot) -> f64 {
+    match robot {
+        sim::Robot::Car => 0.2,
+        sim::Robot::Point | sim::Robot::Drone | sim::Robot::Doggo => 0.0,
+    }
+}
+
 /// Iterations between checkpoints by default.
 pub const DEFAULT_SAVE_EVERY: usize = 50;
 /// The planner's extra clearance by default: one Point radius (README, *Joint training
@@ -307,8 +322,8 @@ impl SettingError {
 impl JointRunSettings {
     /// The default settings of a run of `task` from `seed`: the robot's step budget
     /// ([`default_steps`]), the planner's goal discs shrunk by the robot's reach radius,
-    /// [`DEFAULT_SAFE_MARGIN`] more clearance, the robot's off-track weight and
-    /// validation interval, and each config's own defaults.
+    /// [`DEFAULT_SAFE_MARGIN`] more clearance, the robot's turn margin, off-track
+    /// weight and validation interval, and each config's own defaults.
     pub fn for_task(task: &Task, seed: u64) -> Result<Self, RunError> {
         let goal_margin = sim::make_env(task.robot, task.map.clone())?.reach_radius();
         Ok(Self {
@@ -324,6 +339,7 @@ impl JointRunSettings {
                 safe_margin: DEFAULT_SAFE_MARGIN,
                 off_track_weight: crate::control::trainer::TrackDefaults::for_robot(task.robot)
                     .off_track_weight,
+                turn_margin: default_turn_margin(task.robot),
                 ..JointConfig::default()
             },
             cpg: CpgConfig { seed, ..CpgConfig::default() },

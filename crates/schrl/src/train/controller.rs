@@ -102,6 +102,9 @@ impl ControllerSession {
         let total = t.total_updates();
         let (start, first_step) = (Instant::now(), t.steps);
         let mut stopped = false;
+        // The update the last checkpoint of this session holds: the closing save is
+        // skipped when the periodic one has just written the same state.
+        let mut saved_at = None;
         while !t.finished() {
             let m = t.train_update()?;
             log.append(&m)?;
@@ -109,13 +112,16 @@ impl ControllerSession {
             history.push(m);
             if t.updates.is_multiple_of(save_every.max(1)) {
                 self.run.save(|f| store::controller::save_into(f, t))?;
+                saved_at = Some(t.updates);
             }
             if watcher.stop_requested() {
                 stopped = true;
                 break;
             }
         }
-        self.run.save(|f| store::controller::save_into(f, t))?;
+        if saved_at != Some(t.updates) {
+            self.run.save(|f| store::controller::save_into(f, t))?;
+        }
         let (seconds, steps) = (start.elapsed().as_secs_f64(), t.steps - first_step);
         let curve = if stopped {
             None
