@@ -380,6 +380,10 @@ fn joint_train_killed_or_interrupted_resumes_bit_for_bit() {
     assert_eq!(child.wait().unwrap().code(), Some(130));
     let o = schrl(&["train", "--resume", "--pg-weight", "0.5", "--out", s]);
     assert!(!o.status.success() && stderr(&o).contains("--pg-weight differs"), "{}", stderr(&o));
+    // The guide is on by default and saved so: turning it off would change the run.
+    assert!(manifest(&stopped)["settings"]["pretrain"]["guide"] == true);
+    let o = schrl(&["train", "--resume", "--no-pretrain-guide", "--out", s]);
+    assert!(!o.status.success() && stderr(&o).contains("--no-pretrain-guide"), "{}", stderr(&o));
     let o = schrl(&["train", "--resume", "--out", s]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(files(&stopped), files(&straight));

@@ -412,16 +412,19 @@ fn runs_per_start_must_divide_the_plan_batch() {
 
 /// Point Loop seed 9 once kept a planner at 0.000 after its 9 candidates: while none
 /// has found the task, candidates follow up to ten rounds, then again with the task's
-/// own clearance; each is reported.
+/// own clearance; each is reported. The guided candidate, on by default, follows only
+/// candidates of a real budget (`GUIDE_MIN_UPDATES`): a smoke test does not pay for it.
 #[test]
 fn pretraining_keeps_trying_while_no_candidate_has_found_the_task() {
-    use schrl::plan::pretrain::{FOUND, PretrainConfig, pretrain};
+    use schrl::plan::pretrain::{FOUND, GUIDE_MIN_UPDATES, PretrainConfig, pretrain};
     let control = ControlTrainer::new(ControlConfig::for_robot(Robot::Point)).unwrap();
     let cfg = JointConfig { safe_margin: 0.1, ..JointConfig::default() };
     let mut t = JointTrainer::new(Task::point(TaskKind::Loop), cfg, CpgConfig::default(), control).unwrap();
-    // Two updates per candidate find nothing; no guided candidate after them (it would
-    // find the task: `a_guided_candidate_plans_like_the_gradient_planner_it_was_fitted_to`).
-    let pre = PretrainConfig { updates: 2, candidates: 1, guide: false, ..PretrainConfig::default() };
+    // Two updates per candidate find nothing; no guided candidate after them (with a
+    // real budget it would find the task:
+    // `a_guided_candidate_plans_like_the_gradient_planner_it_was_fitted_to`).
+    let pre = PretrainConfig { updates: 2, candidates: 1, ..PretrainConfig::default() };
+    assert!(pre.guide && pre.updates < GUIDE_MIN_UPDATES, "the guide is on by default");
     let kept = pretrain(&mut t, &pre, &mut |_| {}).unwrap().unwrap();
     assert!(kept.satisfaction < FOUND);
     let with_margin = kept.candidates.iter().filter(|c| c.with_safe_margin).count();
@@ -468,7 +471,7 @@ fn pretrained(kind: TaskKind, cfg: JointConfig) -> JointTrainer {
     let mut t =
         JointTrainer::new(Task::point(kind), cfg, CpgConfig { seed: 1, ..CpgConfig::default() }, control)
             .unwrap();
-    let pre = PretrainConfig { updates: 1000, candidates: 1, ..PretrainConfig::default() };
+    let pre = PretrainConfig { updates: 1000, candidates: 1, guide: false, ..PretrainConfig::default() };
     pretrain(&mut t, &pre, &mut |_| {}).unwrap().expect("a kept planner");
     t
 }

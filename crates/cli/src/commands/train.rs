@@ -83,9 +83,14 @@ pub struct TrainArgs {
     #[arg(long)]
     pretrain_horizon_from: Option<usize>,
     /// When pre-training's candidates never find the task, try a guided candidate (the
-    /// network fitted to the gradient planner's plans from many starts).
-    #[arg(long)]
+    /// network fitted to the gradient planner's plans from many starts) [default: on
+    /// for candidates of 1000 updates or more; this flag is kept for older scripts].
+    #[arg(long, conflicts_with = "no_pretrain_guide")]
     pretrain_guide: bool,
+    /// No guided candidate after pre-training's candidates (the default before
+    /// 2026-12-06).
+    #[arg(long)]
+    no_pretrain_guide: bool,
     /// Keep the pre-trained planner fixed in the joint phase (ablation; by default it
     /// learns from the executed runs, Algorithm 1).
     #[arg(long)]
@@ -243,7 +248,7 @@ impl TrainArgs {
         set(&mut p.candidates, self.pretrain_candidates);
         set(&mut p.length_weight, self.pretrain_length_weight);
         set(&mut p.horizon_from, self.pretrain_horizon_from);
-        p.guide |= self.pretrain_guide;
+        p.guide = (p.guide || self.pretrain_guide) && !self.no_pretrain_guide;
         set(&mut s.eval_groups, self.eval_groups);
         set(&mut s.save_every, self.save_every);
         set(&mut s.select_every, self.select_every);
@@ -320,6 +325,7 @@ impl TrainArgs {
                     differs(&self.pretrain_horizon_from, &saved.pretrain.horizon_from),
                 ),
                 ("--pretrain-guide", self.pretrain_guide && !saved.pretrain.guide),
+                ("--no-pretrain-guide", self.no_pretrain_guide && saved.pretrain.guide),
                 ("--freeze-planner", self.freeze_planner && !saved.joint.freeze_planner),
                 ("--runs-per-start", differs(&self.runs_per_start, &saved.joint.runs_per_start)),
                 ("--control-weight", differs(&self.control_weight, &saved.joint.control_weight)),
