@@ -248,7 +248,8 @@ impl TrainArgs {
         set(&mut p.candidates, self.pretrain_candidates);
         set(&mut p.length_weight, self.pretrain_length_weight);
         set(&mut p.horizon_from, self.pretrain_horizon_from);
-        p.guide = (p.guide || self.pretrain_guide) && !self.no_pretrain_guide;
+        // On by default; `--pretrain-guide` only restates it.
+        p.guide &= !self.no_pretrain_guide;
         set(&mut s.eval_groups, self.eval_groups);
         set(&mut s.save_every, self.save_every);
         set(&mut s.select_every, self.select_every);
