@@ -7,17 +7,18 @@
 //! drive), and keeps one: among those whose mean paths satisfy the spec from at least
 //! [`SATISFYING`] of 200 validation starts, the shortest; else the most satisfying.
 //! While none satisfies, more candidates follow, up to three times as many, and up to
-//! ten times as many while none has even [`FOUND`] the task; if still none satisfies
-//! and the run plans with a safe margin, the candidates are trained again with the
-//! task's own clearance (the run's `safe_margin` becomes 0). A candidate whose
-//! attempts keep failing ([`CURRICULUM_AFTER`] restarts) climbs a horizon curriculum
-//! where the spec allows: the task on its first few waypoints, then more
-//! ([`PretrainConfig::horizon_from`]). If after all that no candidate has found the
-//! task, a *guided* candidate follows ([`PretrainConfig::guide`], on by default for
-//! budgets of at least [`GUIDE_MIN_UPDATES`] updates a candidate): the gradient
-//! planner, drawing waypoints at goal centres, plans from each of a batch of starts,
-//! the network is fitted to those plans, and the constrained updates go on from
-//! there with a smaller step. The kept planner
+//! ten times as many while none has even [`FOUND`] the task. If none of those has
+//! found the task, a *guided* candidate follows ([`PretrainConfig::guide`], on by
+//! default for budgets of at least [`GUIDE_MIN_UPDATES`] updates a candidate): the
+//! gradient planner, drawing waypoints at goal centres, plans from each of a batch of
+//! starts, the network is fitted to those plans, and the constrained updates go on
+//! from there with a smaller step, on the task's own clearance. If still none
+//! satisfies and the run plans with a safe margin, the candidates are trained again
+//! with the task's own clearance, as many as the rules above ask with the guided
+//! candidate counted among them (the run's `safe_margin` becomes 0 when one of these
+//! is kept). A candidate whose attempts keep failing ([`CURRICULUM_AFTER`] restarts)
+//! climbs a horizon curriculum where the spec allows: the task on its first few
+//! waypoints, then more ([`PretrainConfig::horizon_from`]). The kept planner
 //! goes on with its λ, Adam state and random stream: the joint phase continues its
 //! training (a λ reset to its initial value would weigh the constraint as at the
 //! start of pre-training, not as the planner has learnt it).
@@ -28,7 +29,11 @@
 //! ran out of time on); several candidates, because a planner can settle on a detour
 //! no small change shortens without crossing a wall (Branch seed 0); the curriculum,
 //! because a recurrent planner that has learnt a short cycle extends it, where a
-//! fresh one on the whole Loop settles at a fixed point on one corner's edge.
+//! fresh one on the whole Loop settles at a fixed point on one corner's edge; the
+//! guided candidate before the retry, not after it, because a retry that has found
+//! nothing runs ten rounds (Drone Signal: 30 candidates, about 4 of its 12–19
+//! minutes), and of the recorded runs only one, a Doggo exploration with a 0.25 m
+//! margin, found the task in the retry where the first round had not.
 
 use serde::{Deserialize, Serialize};
 
@@ -85,6 +90,8 @@ pub struct GuideSizes {
     pub fit_updates: usize,
     /// Fraction of the candidates' step size the constrained updates take.
     pub step_fraction: f64,
+    /// Updates a candidate the guided candidate needs ([`GUIDE_MIN_UPDATES`]).
+    pub min_updates: usize,
 }
 
 /// The guide's sizes, found on Drone Signal with the task's own clearance (a shipped
@@ -96,8 +103,13 @@ pub struct GuideSizes {
 /// - A thirtieth of the step (3e-3 → 1e-4): at 3e-4 the fitted plans' satisfaction
 ///   wandered between 0.6 and 0.8 over 2000 updates (seed 0), at 1e-4 it climbed to
 ///   0.97–1.00. The joint phase keeps it (the kept planner's own settings).
-pub const GUIDE: GuideSizes =
-    GuideSizes { references: 13, starts: 256, fit_updates: 8000, step_fraction: 1.0 / 30.0 };
+pub const GUIDE: GuideSizes = GuideSizes {
+    references: 13,
+    starts: 256,
+    fit_updates: 8000,
+    step_fraction: 1.0 / 30.0,
+    min_updates: GUIDE_MIN_UPDATES,
+};
 
 /// The guided candidate follows only candidates of at least this many updates
 /// ([`PretrainConfig::guide`]). Its constrained updates after the fit are
@@ -201,8 +213,11 @@ pub struct CandidateScore {
     /// Mean length of those paths (metres).
     pub length: f64,
     /// Whether it planned with the run's safe margin (else with the task's own
-    /// clearance, the retry).
+    /// clearance, the retry or the guided candidate).
     pub with_safe_margin: bool,
+    /// Whether it is the guided candidate ([`PretrainConfig::guide`]).
+    #[serde(default)]
+    pub guided: bool,
 }
 
 /// What pre-training kept.
@@ -235,12 +250,28 @@ pub struct PretrainState {
     pub best_with_margin: Option<Candidate>,
     /// The best candidate of the retry with the task's own clearance.
     pub best_own: Option<Candidate>,
+    /// Whether the guided candidate was tried (it is `None` when the gradient planner
+    /// found no plan to fit, or pre-training never asked for it).
+    pub guide_tried: bool,
+    /// The guided candidate ([`PretrainConfig::guide`]).
+    pub guided: Option<Candidate>,
 }
 
 impl PretrainState {
     /// The best candidate of the round with (or without) the safe margin.
     fn best(&self, with_safe_margin: bool) -> &Option<Candidate> {
         if with_safe_margin { &self.best_with_margin } else { &self.best_own }
+    }
+
+    /// How satisfying the best candidate of a round is; the retry's counts the guided
+    /// candidate, which plans with the task's own clearance too.
+    fn best_satisfaction(&self, with_safe_margin: bool) -> f64 {
+        let guided = if with_safe_margin { None } else { self.guided.as_ref() };
+        [self.best(with_safe_margin).as_ref(), guided]
+            .into_iter()
+            .flatten()
+            .map(|c| c.satisfaction)
+            .fold(0.0, f64::max)
     }
 }
 
@@ -250,8 +281,8 @@ pub trait PretrainObserver {
     type Error: From<candle_core::Error>;
     /// Called after every update.
     fn update(&mut self, progress: PretrainProgress);
-    /// Called after each candidate of the rounds is validated and kept or dropped
-    /// (not after the guided one, the last step): where to checkpoint. An error
+    /// Called after each candidate is validated and kept or dropped, and after the
+    /// guided one is tried: where to checkpoint. An error
     /// (a failed save, a stop request) ends pre-training with it.
     fn candidate(&mut self, state: &PretrainState) -> Result<(), Self::Error>;
 }
@@ -285,6 +316,17 @@ pub fn pretrain(
 pub fn pretrain_from<O: PretrainObserver>(
     t: &mut JointTrainer,
     cfg: &PretrainConfig,
+    state: PretrainState,
+    observer: &mut O,
+) -> Result<Option<Pretrained>, O::Error> {
+    pretrain_sized(t, cfg, &GUIDE, state, observer)
+}
+
+/// [`pretrain_from`] with the guided candidate of `sizes` (tests use small ones).
+pub(crate) fn pretrain_sized<O: PretrainObserver>(
+    t: &mut JointTrainer,
+    cfg: &PretrainConfig,
+    sizes: &GuideSizes,
     mut state: PretrainState,
     observer: &mut O,
 ) -> Result<Option<Pretrained>, O::Error> {
@@ -294,25 +336,15 @@ pub fn pretrain_from<O: PretrainObserver>(
     let sat_of = |c: &Option<Candidate>| c.as_ref().map_or(0.0, |c| c.satisfaction);
     let base = *t.plan.config();
     best_candidate(&base, &candidate_task(t, true)?, cfg, &mut state, true, observer)?;
-    let mut dropped = false;
-    let retried = sat_of(&state.best_with_margin) < SATISFYING && t.config.safe_margin > 0.0;
-    if retried {
-        best_candidate(&base, &candidate_task(t, false)?, cfg, &mut state, false, observer)?;
-    }
-    let PretrainState { mut scores, best_with_margin: mut best, best_own } = state;
-    if sat_of(&best_own) > sat_of(&best) {
-        best = best_own;
-        t.config.safe_margin = 0.0;
-        dropped = true;
-    }
-    let mut guided = false;
-    if cfg.guide && cfg.updates >= GUIDE_MIN_UPDATES && sat_of(&best) < FOUND {
-        // On the task the last candidates planned for: the safe margin was dropped
-        // for it, or there is none.
+    let wants_guide =
+        cfg.guide && cfg.updates >= sizes.min_updates && sat_of(&state.best_with_margin) < FOUND;
+    if wants_guide && !state.guide_tried {
+        // On the task's own clearance, as the retry: the searches find no plan to fit
+        // with the 0.1 m margin (Drone Signal; README).
         let own = candidate_task(t, false)?;
-        let done = scores.len() * cfg.updates;
-        let candidate = scores.len() + 1;
-        let g = guided_candidate(&base, &own, cfg, &GUIDE, &mut |i, satisfaction| {
+        let done = state.scores.len() * cfg.updates;
+        let candidate = state.scores.len() + 1;
+        let g = guided_candidate(&base, &own, cfg, sizes, &mut |i, satisfaction| {
             observer.update(PretrainProgress {
                 done: done + i,
                 total: done + cfg.updates,
@@ -320,19 +352,34 @@ pub fn pretrain_from<O: PretrainObserver>(
                 satisfaction,
             })
         })?;
-        if let Some(g) = g {
-            scores.push(CandidateScore {
+        if let Some(g) = &g {
+            state.scores.push(CandidateScore {
                 satisfaction: g.satisfaction,
                 length: g.length,
                 with_safe_margin: false,
+                guided: true,
             });
-            if g.satisfaction > sat_of(&best) {
-                best = Some(g);
-                guided = true;
-                dropped |= t.config.safe_margin > 0.0;
-                t.config.safe_margin = 0.0;
-            }
         }
+        (state.guide_tried, state.guided) = (true, g);
+        observer.candidate(&state)?;
+    }
+    let mut dropped = false;
+    let retried = sat_of(&state.best_with_margin) < SATISFYING && t.config.safe_margin > 0.0;
+    if retried {
+        best_candidate(&base, &candidate_task(t, false)?, cfg, &mut state, false, observer)?;
+    }
+    let PretrainState { scores, best_with_margin: mut best, best_own, guided: guided_candidate, .. } = state;
+    if sat_of(&best_own) > sat_of(&best) {
+        best = best_own;
+        t.config.safe_margin = 0.0;
+        dropped = true;
+    }
+    let mut guided = false;
+    if sat_of(&guided_candidate) > sat_of(&best) {
+        best = guided_candidate;
+        guided = true;
+        dropped |= t.config.safe_margin > 0.0;
+        t.config.safe_margin = 0.0;
     }
     let Some(c) = best else { return Ok(None) };
     let mut plan = c.trainer;
@@ -392,9 +439,9 @@ fn best_candidate<O: PretrainObserver>(
     with_safe_margin: bool,
     observer: &mut O,
 ) -> Result<(), O::Error> {
-    let done = state.scores.iter().filter(|c| c.with_safe_margin == with_safe_margin).count();
+    let done = state.scores.iter().filter(|c| c.with_safe_margin == with_safe_margin && !c.guided).count();
     for k in done..cfg.candidates * FIND_ROUNDS {
-        let best_sat = state.best(with_safe_margin).as_ref().map_or(0.0, |c| c.satisfaction);
+        let best_sat = state.best_satisfaction(with_safe_margin);
         if (k >= cfg.candidates && best_sat >= SATISFYING)
             || (k >= cfg.candidates * EXTRA_ROUNDS && best_sat >= FOUND)
         {
@@ -413,7 +460,7 @@ fn best_candidate<O: PretrainObserver>(
         })?;
         let (satisfaction, length) =
             (plan.mean_satisfaction(VALIDATION_STARTS)?, plan.mean_path_length(VALIDATION_STARTS)?);
-        state.scores.push(CandidateScore { satisfaction, length, with_safe_margin });
+        state.scores.push(CandidateScore { satisfaction, length, with_safe_margin, guided: false });
         let better = match state.best(with_safe_margin) {
             None => true,
             Some(b) if satisfaction >= SATISFYING && b.satisfaction >= SATISFYING => length < b.length,
@@ -550,7 +597,114 @@ fn train_candidate(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::control::{ControlConfig, ControlTrainer};
+    use crate::run::joint::JointConfig;
+    use crate::store::{self, Existing, RunKind, RunWriter};
     use crate::task::TaskKind;
+
+    /// The guide's sizes for tests: small, and after candidates of any budget.
+    const SMALL_GUIDE: GuideSizes =
+        GuideSizes { references: 4, starts: 64, fit_updates: 3000, min_updates: 0, ..GUIDE };
+
+    /// A Point Seq run with the 0.1 m safe margin, whose candidates of `pre` (two
+    /// updates each) never find the task.
+    fn point_seq() -> JointTrainer {
+        let control = ControlTrainer::new(ControlConfig::for_robot(sim::Robot::Point)).unwrap();
+        let cfg = JointConfig { safe_margin: 0.1, ..JointConfig::default() };
+        JointTrainer::new(Task::point(TaskKind::Seq), cfg, CpgConfig::default(), control).unwrap()
+    }
+
+    const PRE: PretrainConfig = PretrainConfig {
+        updates: 2,
+        candidates: 1,
+        length_weight: 0.05,
+        horizon_from: 4,
+        horizon_step: 2,
+        guide: true,
+    };
+
+    /// Why the saving observer stopped pre-training: it was asked to (any other
+    /// failure fails the test where it happens).
+    #[derive(Debug)]
+    struct AfterGuide;
+
+    impl From<candle_core::Error> for AfterGuide {
+        fn from(e: candle_core::Error) -> Self {
+            panic!("pre-training failed: {e}")
+        }
+    }
+
+    /// Saves pre-training after each candidate, as `schrl train` does, and stops once
+    /// the guided candidate was tried when asked to.
+    struct Saving {
+        writer: RunWriter,
+        stop_after_guide: bool,
+    }
+
+    impl PretrainObserver for Saving {
+        type Error = AfterGuide;
+        fn update(&mut self, _: PretrainProgress) {}
+        fn candidate(&mut self, state: &PretrainState) -> Result<(), AfterGuide> {
+            self.writer.save(|f| store::pretrain::save_into(f, state)).unwrap();
+            if self.stop_after_guide && state.guide_tried { Err(AfterGuide) } else { Ok(()) }
+        }
+    }
+
+    /// Regression: the guided candidate came after the retry with the task's own
+    /// clearance, so a run whose candidates never found the task first trained ten
+    /// rounds more (Drone Signal: 30 candidates, about 4 minutes). Now it follows the
+    /// first round, and the retry counts it as found: one round if it satisfies, else
+    /// three (the candidates' own two updates find nothing; the guided one, the network
+    /// fitted to the gradient planner's plans, finds the task). It is saved like every candidate: a run cut off after it goes on without
+    /// fitting it again and ends bit for bit where a run never stopped ends.
+    #[test]
+    fn the_guided_candidate_comes_before_the_retry_shortens_it_and_is_saved() {
+        let scratch = tempfile::tempdir().unwrap();
+        let run = |dir: &str, stop_after_guide: bool| {
+            let writer =
+                RunWriter::create(&scratch.path().join(dir), RunKind::Pretrain, &PRE, Existing::Refuse)
+                    .unwrap();
+            let mut t = point_seq();
+            let mut saving = Saving { writer, stop_after_guide };
+            let kept = pretrain_sized(&mut t, &PRE, &SMALL_GUIDE, PretrainState::default(), &mut saving);
+            (t, kept, saving.writer)
+        };
+        let (mut whole, kept, _) = run("whole", false);
+        let kept = kept.unwrap().unwrap();
+        let c = &kept.candidates;
+        assert!(c[..10].iter().all(|c| c.with_safe_margin && !c.guided && c.satisfaction < FOUND), "{c:?}");
+        assert!(c[10].guided && !c[10].with_safe_margin && c[10].satisfaction >= FOUND, "{c:?}");
+        let retry = if c[10].satisfaction >= SATISFYING { 1 } else { EXTRA_ROUNDS };
+        assert_eq!(c.len(), 11 + retry, "the retry after it: {c:?}");
+        assert!(c[11..].iter().all(|c| !c.with_safe_margin && !c.guided));
+        assert!(kept.guided && kept.retried_without_safe_margin && kept.dropped_safe_margin);
+        assert_eq!((kept.satisfaction, whole.config.safe_margin), (c[10].satisfaction, 0.0));
+        // The kept planner trains on at a fraction of the step, never restarting.
+        let (own, base) = (whole.plan.config(), CpgConfig::default());
+        assert_eq!((own.lr, own.restart_after), (base.lr * GUIDE.step_fraction, None));
+
+        let (_, stopped, writer) = run("stopped", true);
+        assert!(matches!(stopped, Err(AfterGuide)), "{stopped:?}");
+        let mut resumed = point_seq();
+        let state = store::pretrain::load_from(&writer.checkpoint(), &resumed).unwrap();
+        assert!(state.guide_tried && state.guided.is_some() && state.scores.len() == 11);
+        let mut heard = 0;
+        let mut count = |p: PretrainProgress| heard = heard.max(p.candidate);
+        let rest = pretrain_sized(&mut resumed, &PRE, &SMALL_GUIDE, state, &mut ProgressOnly(&mut count))
+            .unwrap()
+            .unwrap();
+        assert!(
+            heard <= EXTRA_ROUNDS,
+            "only the retry's candidates trained, not the guide's {} updates",
+            PRE.updates
+        );
+        assert_eq!(rest, kept);
+        let sample = |t: &mut JointTrainer| {
+            t.plan.sample(8).unwrap().paths.flatten_all().unwrap().to_vec1::<f32>().unwrap()
+        };
+        assert_eq!(sample(&mut resumed), sample(&mut whole), "the kept planner, weights and random stream");
+        assert_eq!(resumed.plan.state(), whole.plan.state());
+    }
 
     /// A candidate is validated, and kept, on the whole task: one whose updates ran
     /// out on a rung of the curriculum must not be judged on a shorter path.
@@ -567,25 +721,5 @@ mod tests {
         assert_eq!(seen, (1..=cfg.updates).collect::<Vec<_>>());
         assert!(plan.restarts() > CURRICULUM_AFTER);
         assert_eq!((plan.task().steps, plan.task().formula()), (task.steps, task.formula()));
-    }
-
-    /// The guided candidate is the network fitted to the gradient planner's plans and
-    /// then trained at a fraction of the step without restarts: on Point Seq, small
-    /// sizes, its mean paths satisfy from most starts after a few updates, where a
-    /// fresh network's satisfy from none.
-    #[test]
-    fn a_guided_candidate_plans_like_the_gradient_planner_it_was_fitted_to() {
-        let task = Task::point(TaskKind::Seq);
-        let base = CpgConfig::default();
-        let fresh = PlanTrainer::new(task.clone(), base).unwrap();
-        assert!(fresh.mean_satisfaction(VALIDATION_STARTS).unwrap() < 0.1);
-        let cfg = PretrainConfig { updates: 20, ..PretrainConfig::default() };
-        let sizes = GuideSizes { references: 4, starts: 64, fit_updates: 3000, ..GUIDE };
-        let mut heard = vec![];
-        let c = guided_candidate(&base, &task, &cfg, &sizes, &mut |i, _| heard.push(i)).unwrap().unwrap();
-        assert_eq!(heard, (1..=cfg.updates).collect::<Vec<_>>());
-        assert!(c.satisfaction >= 0.9, "guided mean paths satisfy from {} of the starts", c.satisfaction);
-        let own = c.trainer.config();
-        assert_eq!((own.lr, own.restart_after), (base.lr * GUIDE.step_fraction, None));
     }
 }

@@ -1,7 +1,8 @@
 //! Planner pre-training between candidates (`DIR/pretrain/` of a `schrl train` run,
 //! [`PRETRAIN`]): `pretrain.json` (every candidate's score so far, and of each
-//! round's best candidate its settings, validation and trainer state) and each best
-//! candidate's weights (`with-margin.safetensors`, `own.safetensors`). A run cut off
+//! round's best candidate and of the guided candidate their settings, validation and
+//! trainer state) and their weights (`with-margin.safetensors`, `own.safetensors`,
+//! `guided.safetensors`). A run cut off
 //! while pre-training goes on from the last candidate instead of from the first
 //! ([`crate::plan::pretrain::PretrainState`]).
 
@@ -27,6 +28,11 @@ struct State {
     scores: Vec<CandidateScore>,
     best_with_margin: Option<Kept>,
     best_own: Option<Kept>,
+    /// Saves from before the guided candidate was saved have neither field.
+    #[serde(default)]
+    guide_tried: bool,
+    #[serde(default)]
+    guided: Option<Kept>,
 }
 
 /// A round's best candidate, less its weights.
@@ -39,16 +45,34 @@ struct Kept {
     trainer: PlanTrainerState,
 }
 
-/// The weights file of a round's best candidate.
-fn weights(with_safe_margin: bool) -> &'static str {
-    if with_safe_margin { "with-margin.safetensors" } else { "own.safetensors" }
+/// Which kept candidate a weights file holds.
+#[derive(Clone, Copy)]
+enum Slot {
+    WithMargin,
+    Own,
+    Guided,
+}
+
+impl Slot {
+    fn weights(self) -> &'static str {
+        match self {
+            Slot::WithMargin => "with-margin.safetensors",
+            Slot::Own => "own.safetensors",
+            Slot::Guided => "guided.safetensors",
+        }
+    }
+
+    /// Whether its candidate planned with the run's safe margin.
+    fn with_safe_margin(self) -> bool {
+        matches!(self, Slot::WithMargin)
+    }
 }
 
 /// Writes pre-training's `state` into a save.
 pub fn save_into(files: &mut SaveFiles, state: &PretrainState) -> Result<(), StoreError> {
-    let mut kept = |c: &Option<Candidate>, with_safe_margin: bool| -> Result<Option<Kept>, StoreError> {
+    let mut kept = |c: &Option<Candidate>, slot: Slot| -> Result<Option<Kept>, StoreError> {
         let Some(c) = c else { return Ok(None) };
-        planner::save_named(files, weights(with_safe_margin), &c.trainer)?;
+        planner::save_named(files, slot.weights(), &c.trainer)?;
         Ok(Some(Kept {
             cpg: *c.trainer.config(),
             satisfaction: c.satisfaction,
@@ -59,8 +83,10 @@ pub fn save_into(files: &mut SaveFiles, state: &PretrainState) -> Result<(), Sto
     let state = State {
         format: STATE_FORMAT,
         scores: state.scores.clone(),
-        best_with_margin: kept(&state.best_with_margin, true)?,
-        best_own: kept(&state.best_own, false)?,
+        best_with_margin: kept(&state.best_with_margin, Slot::WithMargin)?,
+        best_own: kept(&state.best_own, Slot::Own)?,
+        guide_tried: state.guide_tried,
+        guided: kept(&state.guided, Slot::Guided)?,
     };
     files.json(STATE, &state)
 }
@@ -71,16 +97,18 @@ pub fn load_from(ckpt: &Checkpoint, t: &JointTrainer) -> Result<PretrainState, S
     let state: State = ckpt.json(STATE)?;
     let path = ckpt.path_of(STATE);
     check_format(&path, state.format, STATE_FORMAT, "the pre-training state")?;
-    let restore = |kept: Option<Kept>, with_safe_margin: bool| -> Result<Option<Candidate>, StoreError> {
+    let restore = |kept: Option<Kept>, slot: Slot| -> Result<Option<Candidate>, StoreError> {
         let Some(k) = kept else { return Ok(None) };
-        let task = candidate_task(t, with_safe_margin).map_err(|e| invalid(&path, e.to_string()))?;
+        let task = candidate_task(t, slot.with_safe_margin()).map_err(|e| invalid(&path, e.to_string()))?;
         let mut trainer = PlanTrainer::new(task, k.cpg).map_err(|e| invalid(&path, e.to_string()))?;
-        planner::restore_named(ckpt, weights(with_safe_margin), &mut trainer, k.trainer)?;
+        planner::restore_named(ckpt, slot.weights(), &mut trainer, k.trainer)?;
         Ok(Some(Candidate { trainer, satisfaction: k.satisfaction, length: k.length }))
     };
     Ok(PretrainState {
         scores: state.scores,
-        best_with_margin: restore(state.best_with_margin, true)?,
-        best_own: restore(state.best_own, false)?,
+        best_with_margin: restore(state.best_with_margin, Slot::WithMargin)?,
+        best_own: restore(state.best_own, Slot::Own)?,
+        guide_tried: state.guide_tried,
+        guided: restore(state.guided, Slot::Guided)?,
     })
 }
