@@ -15,6 +15,18 @@
 //! physics step (250 Hz), as flight controllers run attitude faster than position;
 //! rotor forces come from inverting the mixer and are clipped to [0, max].
 //!
+//! The vertical setpoint is shaped (this project's, not the reference's): the
+//! vertical loop acts on thrust directly with the larger gains, a horizontal one
+//! through the attitude loop's lag, so with the goal's height as its setpoint the
+//! Drone reached a new height first and flew the rest of a hop level, up to 0.25 m off
+//! the straight segment the planner keeps clear (Drone Signal's collisions with the
+//! duck's head). The setpoint is instead the height a horizontal axis would have,
+//! moving to the goal's height with the base horizontal gains behind the attitude
+//! loop's time constant (torque D / P = 1 s), offset so that the vertical loop
+//! follows it ([`Drone::height_model`]). Every axis then answers alike, and a hop
+//! from rest or along the line it came on is flown straight; a move that is only
+//! vertical is as slow as a horizontal one.
+//!
 //! The 18-dimensional action scales the controller's gains: force P, I, D and
 //! torque P, I, D, three axes each, `gain = base · 2^(a/8)` with `a ∈ [−1, 1]` (each
 //! gain within ±9 % of its base, [`GAIN_RANGE_LOG2`]). The base loop is only just
@@ -62,6 +74,8 @@ const YAW_PER_FORCE: f64 = KM / KF;
 const ROLL_MIX: f64 = 1.0 / (2.0 * ARM);
 const YAW_MIX: f64 = 1.0 / (4.0 * YAW_PER_FORCE);
 const INTEGRAL_LIMIT: f64 = 2.0;
+// The attitude loop's time constant, torque D over torque P (s).
+const ATTITUDE_LAG: f64 = BASE_GAINS[15] / BASE_GAINS[9];
 
 /// How far an action moves a gain, in octaves: `gain = base · 2^(GAIN_RANGE_LOG2 · a)`,
 /// `a ∈ [−1, 1]`; the widest range whose every corner settles a 3 m step (the
@@ -93,6 +107,12 @@ pub struct Drone {
     pub accel: [f64; 3],
     /// The last rotor forces (N).
     pub rotors: [f64; 4],
+    /// The height model the vertical setpoint is shaped from (height, vertical speed
+    /// and acceleration; the module docs say why); `None` until the first control
+    /// step, which starts it at rest at the Drone's height (also in states saved before
+    /// it existed).
+    #[serde(default)]
+    pub height_model: Option<[f64; 3]>,
 }
 
 impl Default for Drone {
@@ -106,6 +126,7 @@ impl Default for Drone {
             att_integral: [0.0; 3],
             accel: [0.0; 3],
             rotors: [HOVER_FORCE; 4],
+            height_model: None,
         }
     }
 }
@@ -148,8 +169,21 @@ impl Drone {
         hit
     }
 
+    /// The vertical setpoint for a goal at height `goal_z`: the height a horizontal
+    /// axis would have, moving toward `goal_z` through the base horizontal gains and
+    /// the attitude loop's lag, offset so that the vertical loop follows it.
+    fn shaped_height(&mut self, goal_z: f64) -> f64 {
+        let [z, vz, az] = self.height_model.get_or_insert([self.pos[2], 0.0, 0.0]);
+        let command = (BASE_GAINS[0] * (goal_z - *z) - BASE_GAINS[6] * *vz) / MASS;
+        *az += CONTROL_DT * (command - *az) / ATTITUDE_LAG;
+        *vz += CONTROL_DT * *az;
+        *z += CONTROL_DT * *vz;
+        *z + (MASS * *az + BASE_GAINS[8] * *vz) / BASE_GAINS[2]
+    }
+
     /// The position loop: desired attitude and collective thrust toward `goal`.
     fn position_loop(&mut self, gains: &[f64; 18], goal: &[f64]) -> ([[f64; 3]; 3], f64) {
+        let goal = [goal[0], goal[1], self.shaped_height(goal[2])];
         let mut force = [0.0; 3];
         for i in 0..3 {
             let e = goal[i] - self.pos[i];
