@@ -15,17 +15,22 @@
 //! physics step (250 Hz), as flight controllers run attitude faster than position;
 //! rotor forces come from inverting the mixer and are clipped to [0, max].
 //!
-//! The vertical setpoint is shaped (this project's, not the reference's): the
-//! vertical loop acts on thrust directly with the larger gains, a horizontal one
-//! through the attitude loop's lag, so with the goal's height as its setpoint the
-//! Drone reached a new height first and flew the rest of a hop level, up to 0.25 m off
-//! the straight segment the planner keeps clear (Drone Signal's collisions with the
-//! duck's head). The setpoint is instead the height a horizontal axis would have,
-//! moving to the goal's height with the base horizontal gains behind the attitude
-//! loop's time constant (torque D / P = 1 s), offset so that the vertical loop
-//! follows it ([`Drone::height_model`]). Every axis then answers alike, and a hop
-//! from rest or along the line it came on is flown straight; a move that is only
-//! vertical is as slow as a horizontal one.
+//! The position loop tracks a reference, not the goal itself (this project's, not
+//! the reference's). Given the goal as its setpoint, the base loop flew a hop along a
+//! curve: the vertical loop acts on thrust directly with the larger gains and a
+//! horizontal one through the attitude loop's lag, so the Drone reached a new height
+//! first and flew the rest level (0.25 m below a descending 2.9 m hop mid-way), and
+//! it carried the speed it turned at into the next hop (0.28 m off it after a 135°
+//! turn); the planner keeps only the straight segments clear (Drone Signal collided
+//! with the duck's head so). Instead, each goal starts a [`Hop`]: a minimum-jerk move
+//! along the straight line from the last goal to the new one, from rest to rest, as
+//! fast as keeps the force it asks for within half of what the 30° tilt limit allows.
+//! The setpoint is the hop's position offset by the feed-forward force (its
+//! acceleration, led by the attitude loop's lag on a horizontal axis) and its velocity
+//! under the current gains, so the loop follows the line whatever gains the policy
+//! sets; the gains shape how it rejects what the model leaves out. A new goal waits
+//! until the hop in flight has ended (the Drone counts a waypoint reached before it
+//! stops at it).
 //!
 //! The 18-dimensional action scales the controller's gains: force P, I, D and
 //! torque P, I, D, three axes each, `gain = base · 2^(a/8)` with `a ∈ [−1, 1]` (each
@@ -74,8 +79,11 @@ const YAW_PER_FORCE: f64 = KM / KF;
 const ROLL_MIX: f64 = 1.0 / (2.0 * ARM);
 const YAW_MIX: f64 = 1.0 / (4.0 * YAW_PER_FORCE);
 const INTEGRAL_LIMIT: f64 = 2.0;
-// The attitude loop's time constant, torque D over torque P (s).
+// The attitude loop's time constant with base gains, torque D over torque P (s).
 const ATTITUDE_LAG: f64 = BASE_GAINS[15] / BASE_GAINS[9];
+// The most force per kilogram a hop asks for: half of what the tilt limit allows
+// (g tan 30°), the rest left to the feedback (m/s²).
+const HOP_ACCEL: f64 = 0.5 * G * 0.577_350_269_189_625_8;
 
 /// How far an action moves a gain, in octaves: `gain = base · 2^(GAIN_RANGE_LOG2 · a)`,
 /// `a ∈ [−1, 1]`; the widest range whose every corner settles a 3 m step (the
@@ -107,12 +115,11 @@ pub struct Drone {
     pub accel: [f64; 3],
     /// The last rotor forces (N).
     pub rotors: [f64; 4],
-    /// The height model the vertical setpoint is shaped from (height, vertical speed
-    /// and acceleration; the module docs say why); `None` until the first control
-    /// step, which starts it at rest at the Drone's height (also in states saved before
-    /// it existed).
+    /// The hop the position loop tracks (the module docs say why); `None` until the
+    /// first control step, which starts one from the Drone's position (also in states
+    /// saved before it existed).
     #[serde(default)]
-    pub height_model: Option<[f64; 3]>,
+    pub hop: Option<Hop>,
 }
 
 impl Default for Drone {
@@ -126,7 +133,7 @@ impl Default for Drone {
             att_integral: [0.0; 3],
             accel: [0.0; 3],
             rotors: [HOVER_FORCE; 4],
-            height_model: None,
+            hop: None,
         }
     }
 }
@@ -169,21 +176,31 @@ impl Drone {
         hit
     }
 
-    /// The vertical setpoint for a goal at height `goal_z`: the height a horizontal
-    /// axis would have, moving toward `goal_z` through the base horizontal gains and
-    /// the attitude loop's lag, offset so that the vertical loop follows it.
-    fn shaped_height(&mut self, goal_z: f64) -> f64 {
-        let [z, vz, az] = self.height_model.get_or_insert([self.pos[2], 0.0, 0.0]);
-        let command = (BASE_GAINS[0] * (goal_z - *z) - BASE_GAINS[6] * *vz) / MASS;
-        *az += CONTROL_DT * (command - *az) / ATTITUDE_LAG;
-        *vz += CONTROL_DT * *az;
-        *z += CONTROL_DT * *vz;
-        *z + (MASS * *az + BASE_GAINS[8] * *vz) / BASE_GAINS[2]
+    /// The position loop's setpoint toward `goal` under `gains`: the current hop's
+    /// position, offset so that the loop asks for the hop's feed-forward force.
+    fn setpoint(&mut self, gains: &[f64; 18], goal: &[f64]) -> [f64; 3] {
+        let goal = [goal[0], goal[1], goal[2]];
+        let hop = self.hop.get_or_insert_with(|| Hop::at(self.pos));
+        if hop.elapsed >= hop.duration && hop.to != goal {
+            *hop = Hop::new(hop.to, goal);
+        }
+        hop.elapsed = (hop.elapsed + CONTROL_DT).min(hop.duration);
+        let [p, v, a, j] = hop.state();
+        // Pitch (the body y torque) moves the Drone along its heading, roll across
+        // it; each tilts behind its command by its torque D / P, so the force leads
+        // the acceleration by that lag times the jerk.
+        let r = self.att.matrix();
+        let n = r[0][0].hypot(r[1][0]).max(1e-9);
+        let (c, s) = (r[0][0] / n, r[1][0] / n);
+        let along = c * a[0] + s * a[1] + (c * j[0] + s * j[1]) * gains[16] / gains[10];
+        let across = -s * a[0] + c * a[1] + (-s * j[0] + c * j[1]) * gains[15] / gains[9];
+        let force = [MASS * (c * along - s * across), MASS * (s * along + c * across), MASS * a[2]];
+        std::array::from_fn(|i| p[i] + (force[i] + gains[6 + i] * v[i]) / gains[i])
     }
 
     /// The position loop: desired attitude and collective thrust toward `goal`.
     fn position_loop(&mut self, gains: &[f64; 18], goal: &[f64]) -> ([[f64; 3]; 3], f64) {
-        let goal = [goal[0], goal[1], self.shaped_height(goal[2])];
+        let goal = self.setpoint(gains, goal);
         let mut force = [0.0; 3];
         for i in 0..3 {
             let e = goal[i] - self.pos[i];
@@ -304,5 +321,75 @@ impl Dynamics for Drone {
         obs[9..12].copy_from_slice(&apply_t(&r, MAGNETIC_FIELD));
         obs[12..15].copy_from_slice(&apply_t(&r, [0.0, 0.0, 1.0]));
         obs[15..18].copy_from_slice(&apply_t(&r, to_goal));
+    }
+}
+
+/// One move of the Drone's reference: minimum jerk from `from` to `to`, at rest at
+/// both ends, over `duration` seconds (position `from + σ(τ) (to − from)`, `τ = t / T`,
+/// `σ = 10τ³ − 15τ⁴ + 6τ⁵`). The duration is the shortest whose force stays within
+/// half the tilt limit's, by the bound `(5.77 + 60 lag / T) L / T²` on the hop's
+/// acceleration plus the base attitude lag times its jerk (`|σ″| ≤ 5.77`,
+/// `|σ‴| ≤ 60`), solved by bisection.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Hop {
+    /// Where the hop starts.
+    pub from: [f64; 3],
+    /// Where it ends.
+    pub to: [f64; 3],
+    /// Seconds since it started.
+    pub elapsed: f64,
+    /// Its length in seconds.
+    pub duration: f64,
+}
+
+impl Hop {
+    /// Holding still at `p`.
+    pub fn at(p: [f64; 3]) -> Self {
+        Self { from: p, to: p, elapsed: 0.0, duration: 0.0 }
+    }
+
+    /// The hop from `from` to `to`.
+    pub fn new(from: [f64; 3], to: [f64; 3]) -> Self {
+        let length = crate::segment::point_distance(&from, &to);
+        if length == 0.0 {
+            return Self::at(to);
+        }
+        let accel = |t: f64| length * (5.7735 + 60.0 * ATTITUDE_LAG / t) / (t * t);
+        let (mut lo, mut hi) = (0.0, 1.0);
+        while accel(hi) > HOP_ACCEL {
+            hi *= 2.0;
+        }
+        for _ in 0..40 {
+            let mid = 0.5 * (lo + hi);
+            if accel(mid) > HOP_ACCEL {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        Self { from, to, elapsed: 0.0, duration: hi }
+    }
+
+    /// Position, velocity, acceleration and jerk now.
+    pub fn state(&self) -> [[f64; 3]; 4] {
+        if self.elapsed >= self.duration {
+            return [self.to, [0.0; 3], [0.0; 3], [0.0; 3]];
+        }
+        let t = self.duration;
+        let u = self.elapsed / t;
+        let scale = [
+            u * u * u * (10.0 + u * (-15.0 + 6.0 * u)),
+            30.0 * u * u * (1.0 + u * (-2.0 + u)) / t,
+            60.0 * u * (1.0 + u * (-3.0 + 2.0 * u)) / (t * t),
+            60.0 * (1.0 + u * (-6.0 + 6.0 * u)) / (t * t * t),
+        ];
+        let mut out = [[0.0; 3]; 4];
+        for (k, row) in out.iter_mut().enumerate() {
+            for i in 0..3 {
+                let base = if k == 0 { self.from[i] } else { 0.0 };
+                row[i] = base + scale[k] * (self.to[i] - self.from[i]);
+            }
+        }
+        out
     }
 }
