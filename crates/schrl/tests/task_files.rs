@@ -312,17 +312,19 @@ fn a_waypoint_counts_as_reached_within_two_thirds_of_the_smallest_goal() {
 }
 
 /// Regression: with the reference's 4000 steps every Drone Loop run timed out (seeds 0
-/// and 1, 500 of 500 runs, after the planner had found the bounce): 20 hops of 1.4 m
-/// each, reached within 0.33 m, take the Drone's position loop over 4000 steps. Flown
-/// with the base gains (the zero action) from the start region's corner (2, −2, 0.5),
-/// the bounce needs more than 4000 steps and fits the task's limit.
+/// and 1, 500 of 500 runs, after the planner had found the bounce): 20 hops of 1.4 m,
+/// each reached within 0.33 m, took the Drone's position loop over 4000 steps with the
+/// goal as its setpoint, hence the task's 6000 (the paper's own pace, 2343 steps for
+/// ten goals, needs about 4700 for twenty). Tracking hops from rest to rest (16a016d),
+/// the Drone flies the bounce with its base gains (the zero action), from the start
+/// region's high corner, in 3393.
 #[test]
-fn drone_loop_timed_out_with_the_references_4000_steps() {
+fn drone_loop_bounce_fits_the_task_step_limit() {
     use schrl::run::execute::{Dispatch, Outcome, start_run, task_env};
     let t = Task::builtin("drone", TaskKind::Loop).unwrap();
     let mut env = task_env(sim::Robot::Drone, &t, false).unwrap();
     let bounce = [vec![1.0, 1.0, 2.0], vec![2.0, 1.0, 1.0]];
-    let start = vec![t.start.1[0], t.start.0[1], t.start.0[2]];
+    let start = t.start.1.clone();
     let path: Vec<Vec<f64>> =
         std::iter::once(start).chain((0..t.steps).map(|k| bounce[k % 2].clone())).collect();
     let mut obs = vec![0.0; env.observation_space().dim()];
@@ -337,7 +339,7 @@ fn drone_loop_timed_out_with_the_references_4000_steps() {
         }
     };
     assert_eq!(outcome, Outcome::Completed, "after {} steps, {} waypoints", run.steps(), run.reached_count());
-    assert!(run.steps() > 4000 && run.steps() < t.step_limit, "{} steps", run.steps());
+    assert!(run.steps() < 4000, "{} steps", run.steps());
 }
 
 /// Why Drone Loop is hard for the planner (README, *Car and Drone*): every waypoint
