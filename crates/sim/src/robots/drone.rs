@@ -178,7 +178,7 @@ impl Drone {
 
     /// The position loop's setpoint toward `goal` under `gains`: the current hop's
     /// position, offset so that the loop asks for the hop's feed-forward force.
-    fn setpoint(&mut self, gains: &[f64; 18], goal: &[f64]) -> [f64; 3] {
+    fn setpoint(&mut self, r: &[[f64; 3]; 3], gains: &[f64; 18], goal: &[f64]) -> [f64; 3] {
         let goal = [goal[0], goal[1], goal[2]];
         let hop = self.hop.get_or_insert_with(|| Hop::at(self.pos));
         if hop.elapsed >= hop.duration && hop.to != goal {
@@ -189,7 +189,6 @@ impl Drone {
         // Pitch (the body y torque) moves the Drone along its heading, roll across
         // it; each tilts behind its command by its torque D / P, so the force leads
         // the acceleration by that lag times the jerk.
-        let r = self.att.matrix();
         let n = r[0][0].hypot(r[1][0]).max(1e-9);
         let (c, s) = (r[0][0] / n, r[1][0] / n);
         let along = c * a[0] + s * a[1] + (c * j[0] + s * j[1]) * gains[16] / gains[10];
@@ -200,7 +199,8 @@ impl Drone {
 
     /// The position loop: desired attitude and collective thrust toward `goal`.
     fn position_loop(&mut self, gains: &[f64; 18], goal: &[f64]) -> ([[f64; 3]; 3], f64) {
-        let goal = self.setpoint(gains, goal);
+        let r = self.att.matrix();
+        let goal = self.setpoint(&r, gains, goal);
         let mut force = [0.0; 3];
         for i in 0..3 {
             let e = goal[i] - self.pos[i];
@@ -222,7 +222,6 @@ impl Drone {
         // Yaw held where it is (x_c = the body x axis flattened): the drone starts at
         // a random yaw, and a large yaw error couples into roll and pitch through
         // the attitude error and tilts the drone away from the goal.
-        let r = self.att.matrix();
         let (cx, cy) = (r[0][0], r[1][0]);
         let cn = (cx * cx + cy * cy).sqrt().max(1e-9);
         let y = cross(z, [cx / cn, cy / cn, 0.0]);
