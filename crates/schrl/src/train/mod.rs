@@ -472,9 +472,13 @@ fn first_checkpoint(
             ));
         }
         if k.guided {
+            let clearance = match t.config.safe_margin {
+                0.0 => "the task's own clearance".to_string(),
+                m => format!("{m} m more clearance"),
+            };
             watcher.note(&format!(
                 "planner: no candidate found the task; kept the guided one, fitted to the gradient \
-                 planner's plans from {} starts",
+                 planner's plans from {} starts with {clearance}",
                 crate::plan::pretrain::GUIDE.starts
             ));
         }
