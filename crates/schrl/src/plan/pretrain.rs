@@ -14,12 +14,13 @@
 //! starts, the network is fitted to those plans, and the constrained updates go on
 //! from there with a smaller step, with the run's safe margin where the gradient
 //! planner meets it, else on the task's own clearance. If still none satisfies with
-//! the margin and the guide did not keep it, the candidates are trained again with
-//! the task's own clearance, as many as the rules above ask, a guided candidate
-//! without the margin counted among them (the run's `safe_margin` becomes 0 when one
-//! of these is kept). A candidate whose attempts keep failing ([`CURRICULUM_AFTER`] restarts)
-//! climbs a horizon curriculum where the spec allows: the task on its first few
-//! waypoints, then more ([`PretrainConfig::horizon_from`]). The kept planner
+//! the margin and no guided candidate kept it (satisfying from some starts), the
+//! candidates are trained again with the task's own clearance, as many as the rules
+//! above ask, a guided candidate without the margin counted among them (the run's
+//! `safe_margin` becomes 0 when one of these is kept). A candidate whose attempts keep
+//! failing ([`CURRICULUM_AFTER`] restarts) climbs a horizon curriculum where the spec
+//! allows: the task on its first few waypoints, then more
+//! ([`PretrainConfig::horizon_from`]). The kept planner
 //! goes on with its λ, Adam state and random stream: the joint phase continues its
 //! training (a λ reset to its initial value would weigh the constraint as at the
 //! start of pre-training, not as the planner has learnt it).
@@ -384,12 +385,14 @@ pub(crate) fn pretrain_sized<O: PretrainObserver>(
         (state.guide_tried, state.guided) = (true, found.map(|(g, _)| g));
         observer.candidate(&state)?;
     }
-    // A guided candidate that kept the margin ends the search: the retry is for a
-    // margin no plan keeps, and the gradient planner found one that does (Drone
-    // Signal seeds 0 and 1: after one at 0.50 and 0.41 of the starts, the retry's 30
-    // candidates found nothing, 5 minutes; the joint phase took the guided ones to
-    // 0.986 and 1.000).
-    let guide_kept_margin = state.guided.is_some() && state.guided_with_margin();
+    // A guided candidate that kept the margin ends the search, once its mean paths
+    // satisfy from any start: the retry is for a margin no plan keeps, and the
+    // gradient planner found one that does (Drone Signal seeds 0 and 1: after one at
+    // 0.50 and 0.41 of the starts, the retry's 30 candidates found nothing, 5 minutes;
+    // the joint phase took the guided ones to 0.986 and 1.000). One whose fit found
+    // nothing leaves the retry its chance.
+    let guide_kept_margin =
+        state.guided.as_ref().is_some_and(|g| g.satisfaction > 0.0) && state.guided_with_margin();
     let retried =
         !guide_kept_margin && state.best_satisfaction(true) < SATISFYING && t.config.safe_margin > 0.0;
     if retried {
