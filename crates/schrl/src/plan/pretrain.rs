@@ -391,14 +391,13 @@ pub(crate) fn pretrain_sized<O: PretrainObserver>(
     // 0.50 and 0.41 of the starts, the retry's 30 candidates found nothing, 5 minutes;
     // the joint phase took the guided ones to 0.986 and 1.000). One whose fit found
     // nothing leaves the retry its chance.
-    let guide_kept_margin =
-        state.guided.as_ref().is_some_and(|g| g.satisfaction > 0.0) && state.guided_with_margin();
+    let guided_with_margin = state.guided_with_margin();
+    let guide_kept_margin = guided_with_margin && state.guided.as_ref().is_some_and(|g| g.satisfaction > 0.0);
     let retried =
         !guide_kept_margin && state.best_satisfaction(true) < SATISFYING && t.config.safe_margin > 0.0;
     if retried {
         best_candidate(&base, &candidate_task(t, false)?, cfg, &mut state, false, observer)?;
     }
-    let guided_with_margin = state.guided_with_margin();
     let PretrainState { scores, best_with_margin: mut best, best_own, guided: guided_candidate, .. } = state;
     let mut keeps_margin = true;
     if sat_of(&best_own) > sat_of(&best) {
