@@ -16,7 +16,7 @@ use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watche
 use sim::Robot;
 
 /// The settings keywords of `schrl.train`: `schrl train`'s flags with `_` for `-`.
-const SETTINGS: [&str; 28] = [
+const SETTINGS: [&str; 29] = [
     "steps",
     "target",
     "controller",
@@ -45,6 +45,7 @@ const SETTINGS: [&str; 28] = [
     "eval_groups",
     "save_every",
     "select_every",
+    "controller_tries",
 ];
 
 /// Sets the setting `key` of `s` to `value`; returns whether its value changed.
@@ -99,6 +100,7 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
         "eval_groups" => set(&mut s.eval_groups, count()?),
         "save_every" => set(&mut s.save_every, count()?),
         "select_every" => set(&mut s.select_every, count()?),
+        "controller_tries" => set(&mut s.controller_tries, count()?),
         other => {
             return Err(PyTypeError::new_err(format!(
                 "train() got an unexpected keyword argument '{other}'; the settings are {}",

@@ -221,6 +221,38 @@ fn joint_train_resume_and_eval_end_to_end() {
         ctl.to_str().unwrap(),
     ]);
     assert!(o.status.success() && stdout(&o).contains("satisfaction: "), "{}", stderr(&o));
+    // `--general-controller` drives with the general controller the run kept: the one
+    // its `general.json` names (a retry here), else DIR/general.
+    let general = ["eval", "--ckpt", run_s, "--groups", "1", "--per-group", "3", "--general-controller"];
+    let o = schrl(&general);
+    assert!(!o.status.success() && stderr(&o).contains("general"), "{}", stderr(&o));
+    let copy = |to: &str| {
+        std::fs::create_dir_all(run.join(to)).unwrap();
+        for f in std::fs::read_dir(&ctl).unwrap() {
+            let f = f.unwrap().path();
+            if f.is_dir() {
+                let sub = run.join(to).join(f.file_name().unwrap());
+                std::fs::create_dir_all(&sub).unwrap();
+                for g in std::fs::read_dir(&f).unwrap() {
+                    let g = g.unwrap().path();
+                    std::fs::copy(&g, sub.join(g.file_name().unwrap())).unwrap();
+                }
+            } else if f.file_name().unwrap() != ".lock" {
+                std::fs::copy(&f, run.join(to).join(f.file_name().unwrap())).unwrap();
+            }
+        }
+    };
+    copy("general-2");
+    let choice = r#"{"tries": [{"dir": "general", "seed": 0, "success_rate": 0.5},
+        {"dir": "general-2", "seed": 1, "success_rate": 1.0}], "kept": 1}"#;
+    std::fs::write(run.join("general.json"), choice).unwrap();
+    let o = schrl(&general);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let with_ctl = schrl(&[&general[..7], &["--controller", ctl.to_str().unwrap()]].concat());
+    assert_eq!(stdout(&o), stdout(&with_ctl), "the kept retry is the controller driven");
+    let o = schrl(&[&general[..], &["--controller", ctl.to_str().unwrap()]].concat());
+    assert!(!o.status.success() && stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
+    std::fs::remove_file(run.join("general.json")).unwrap();
     let o = schrl(&["eval", "--ckpt", run_s, "--planner", "gradient", "--sampled-plans"]);
     assert!(!o.status.success() && stderr(&o).contains("goes with --planner network only"), "{}", stderr(&o));
     // A task file decides its robot; every run can be written out and judged again.

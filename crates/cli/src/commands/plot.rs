@@ -236,14 +236,25 @@ pub(crate) fn scores(dir: &Path) -> Result<Curve> {
     // spec score; their joint iterations count from its budget on.
     let offset = match manifest["kind"].as_str() {
         Some("joint") => {
-            let general = match manifest["settings"]["controller"].as_str() {
-                Some(c) => PathBuf::from(c),
-                None => dir.join("general"),
+            // Every general controller the run trained counts (a retried one too,
+            // `schrl train --controller-tries`).
+            let generals = match manifest["settings"]["controller"].as_str() {
+                Some(c) => vec![PathBuf::from(c)],
+                None => {
+                    match schrl::store::controller::load_general_choice(dir).map_err(super::store_error)? {
+                        Some(choice) => choice.tries.iter().map(|t| dir.join(&t.dir)).collect(),
+                        None => vec![dir.join(schrl::store::controller::GENERAL)],
+                    }
+                }
             };
-            let m = read_json(&general.join(schrl::store::MANIFEST))?;
-            m["settings"]["total_steps"].as_f64().with_context(|| {
-                format!("{}: no settings.total_steps", general.join(schrl::store::MANIFEST).display())
-            })?
+            let mut steps = 0.0;
+            for general in generals {
+                let m = read_json(&general.join(schrl::store::MANIFEST))?;
+                steps += m["settings"]["total_steps"].as_f64().with_context(|| {
+                    format!("{}: no settings.total_steps", general.join(schrl::store::MANIFEST).display())
+                })?;
+            }
+            steps
         }
         Some("tltl" | "crm") => 0.0,
         other => bail!(

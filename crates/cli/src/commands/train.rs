@@ -44,6 +44,11 @@ pub struct TrainArgs {
     /// general controller first, into DIR/general).
     #[arg(long)]
     controller: Option<PathBuf>,
+    /// General controllers to train at most before keeping one: each is checked on 500
+    /// random goals and, below 0.95 of them, another is trained from a fresh start; the
+    /// first to pass (or the best) is kept [default: 3; 1: one, unchecked].
+    #[arg(long, value_name = "N")]
+    controller_tries: Option<usize>,
     /// Semantics of the spec in the planner's loss: hard, soft:ALPHA or
     /// lse:TEMPERATURE, a smooth one with ,until=flat|recursive
     /// [default: soft:10,until=flat].
@@ -216,6 +221,7 @@ impl TrainArgs {
         set(&mut s.steps, self.steps);
         set(&mut s.target, self.target.map(Some));
         s.controller.clone_from(&self.controller);
+        set(&mut s.controller_tries, self.controller_tries);
         let j = &mut s.joint;
         set(&mut j.plan_batch, self.plan_batch);
         set(&mut j.goal_margin, self.goal_margin);
@@ -309,6 +315,7 @@ impl TrainArgs {
                 ("--task", task_differs),
                 ("--seed", differs(&self.seed, &saved.seed)),
                 ("--controller", self.controller.is_some() && self.controller != saved.controller),
+                ("--controller-tries", differs(&self.controller_tries, &saved.controller_tries)),
                 ("--semantics", differs(&self.semantics, &saved.cpg.semantics)),
                 ("--planner", differs(&self.planner, &saved.cpg.planner)),
                 ("--plan-batch", differs(&self.plan_batch, &saved.joint.plan_batch)),
@@ -416,10 +423,14 @@ pub struct EvalArgs {
     /// The gradient planner's settings (with `--planner gradient`).
     #[command(flatten)]
     gradient: super::plan::GradientFlags,
-    /// Drive with this `schrl control train` run's controller instead of the run's
-    /// (e.g. DIR/general: the general controller before joint training).
+    /// Drive with this `schrl control train` run's controller instead of the run's.
     #[arg(long)]
     controller: Option<PathBuf>,
+    /// Drive with the run's general controller, the one its joint phase started from
+    /// (DIR/general, or the retry `schrl train` kept: DIR/general.json), instead of the
+    /// jointly trained one.
+    #[arg(long, conflicts_with = "controller")]
+    general_controller: bool,
     /// The goal the controller is given while it executes a plan: waypoints or
     /// carrot:METRES (see `schrl train --follow`) [default: the run's].
     #[arg(long, value_name = "waypoints|carrot:METRES")]
@@ -622,7 +633,11 @@ pub fn eval(args: EvalArgs) -> Result<()> {
         (PlannerChoice::Network, true) => Plans::Sampled(t.plan.planner()),
         (PlannerChoice::Network, false) => Plans::Mean(t.plan.planner()),
     };
-    let controller = match &args.controller {
+    let general = match args.general_controller {
+        true => Some(store::controller::kept_general_dir(&args.ckpt).map_err(super::store_error)?),
+        false => None,
+    };
+    let controller = match general.as_ref().or(args.controller.as_ref()) {
         None => t.control.controller(),
         Some(dir) => {
             let c = store::controller::load(dir).map_err(super::store_error)?;

@@ -225,8 +225,10 @@ fn steps(e: Experiment, method: &str, b: &Base) -> Result<Vec<Step>> {
         Experiment::Fig4 => {
             steps.push(b.train("(a) SCHRL", &[], "run"));
             steps.push(b.train("(d) frozen planner", &["--freeze-planner"], "frozen"));
-            let general = if b.quick { "@general" } else { "@run/general" };
-            let mut flags = strings(&["--ckpt", "@run", "--controller", general]);
+            let mut flags = match b.quick {
+                true => strings(&["--ckpt", "@run", "--controller", "@general"]),
+                false => strings(&["--ckpt", "@run", "--general-controller"]),
+            };
             flags.extend(b.eval_sizes());
             steps.push(Step::once("(b) general controller", "eval", flags));
             let mut flags = strings(&["--ckpt", "@run", "--planner", "gradient"]);

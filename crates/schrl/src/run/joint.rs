@@ -240,6 +240,12 @@ pub struct JointRunSettings {
     /// The controller run warm-starting the controller; `None`: a general controller
     /// trained into the run's `general/`.
     pub controller: Option<std::path::PathBuf>,
+    /// General controllers the run may train before it keeps one
+    /// ([`crate::train::controller::general_controller`]): with more than one, each is
+    /// checked on random goals and a fresh one trained while they fall short. 1 (runs
+    /// saved before it existed): one, unchecked. Default: [`DEFAULT_CONTROLLER_TRIES`].
+    #[serde(default = "one")]
+    pub controller_tries: usize,
     /// Joint-training settings.
     pub joint: JointConfig,
     /// The planner's training hyper-parameters.
@@ -306,6 +312,10 @@ pub fn default_reach(robot: sim::Robot) -> Reach {
 
 /// Iterations between checkpoints by default.
 pub const DEFAULT_SAVE_EVERY: usize = 50;
+/// General controllers a run may train by default before it keeps one
+/// ([`JointRunSettings::controller_tries`]): this project's, not the paper's (README,
+/// *The Car's controller check*).
+pub const DEFAULT_CONTROLLER_TRIES: usize = 3;
 /// The planner's extra clearance by default: one Point radius (README, *Joint training
 /// (Algorithm 1) and results*).
 pub const DEFAULT_SAFE_MARGIN: f64 = 0.1;
@@ -353,6 +363,7 @@ impl JointRunSettings {
             steps: default_steps(task.robot),
             target: None,
             controller: None,
+            controller_tries: DEFAULT_CONTROLLER_TRIES,
             joint: JointConfig {
                 goal_margin,
                 safe_margin: DEFAULT_SAFE_MARGIN,
@@ -394,6 +405,9 @@ impl JointRunSettings {
         }
         if self.save_every == 0 {
             return Err(bad("save_every", "must be at least 1".into()));
+        }
+        if self.controller_tries == 0 {
+            return Err(bad("controller_tries", "must be at least 1".into()));
         }
         let j = &self.joint;
         if j.plan_batch == 0 {

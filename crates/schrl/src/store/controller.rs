@@ -190,3 +190,64 @@ pub fn load(dir: &Path) -> Result<ControlTrainer, StoreError> {
 pub fn load_controller(dir: &Path) -> Result<Controller, StoreError> {
     Ok(load(dir)?.controller())
 }
+
+/// The file in a `schrl train` run directory recording which of its general
+/// controllers the joint phase started from (written only by runs that check them).
+pub const GENERAL_CHOICE: &str = "general.json";
+/// The directory in a run of its (first) general controller.
+pub const GENERAL: &str = "general";
+
+/// One general controller a run trained: its directory (in the run), seed and check.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GeneralTry {
+    /// Directory name in the run: `general`, then `general-2`, `general-3`, …
+    pub dir: String,
+    /// Its training seed.
+    pub seed: u64,
+    /// Fraction of the check's random goals it reached.
+    pub success_rate: f64,
+}
+
+/// What [`GENERAL_CHOICE`] holds: every general controller a run trained, in order,
+/// and which one it kept.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GeneralChoice {
+    /// The controllers trained, in order.
+    pub tries: Vec<GeneralTry>,
+    /// Index into `tries` of the one the joint phase started from.
+    pub kept: usize,
+}
+
+/// Writes `choice` into the run directory `run_dir` (atomically).
+pub fn save_general_choice(run_dir: &Path, choice: &GeneralChoice) -> Result<(), StoreError> {
+    let path = run_dir.join(GENERAL_CHOICE);
+    let text = serde_json::to_vec_pretty(choice).map_err(|e| invalid(&path, e.to_string()))?;
+    super::write_atomic(&path, &text)
+}
+
+/// The [`GeneralChoice`] of the run in `run_dir`; `None` for a run that trained one
+/// general controller without checking it, or was given one.
+pub fn load_general_choice(run_dir: &Path) -> Result<Option<GeneralChoice>, StoreError> {
+    let path = run_dir.join(GENERAL_CHOICE);
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(super::io(&path, e)),
+    };
+    let choice: GeneralChoice = serde_json::from_str(&text).map_err(|e| invalid(&path, e.to_string()))?;
+    if choice.kept >= choice.tries.len() {
+        return Err(invalid(&path, format!("kept try {} of {}", choice.kept + 1, choice.tries.len())));
+    }
+    Ok(Some(choice))
+}
+
+/// The general controller the joint phase of the run in `run_dir` started from: the
+/// one its [`GENERAL_CHOICE`] kept, else its [`GENERAL`] directory.
+pub fn kept_general_dir(run_dir: &Path) -> Result<std::path::PathBuf, StoreError> {
+    Ok(match load_general_choice(run_dir)? {
+        Some(c) => run_dir.join(&c.tries[c.kept].dir),
+        None => run_dir.join(GENERAL),
+    })
+}

@@ -134,18 +134,127 @@ impl ControllerSession {
     }
 }
 
-/// The general controller for `robot` in `dir`: reused when a finished one with the
-/// same settings is there, continued from its last checkpoint when an unfinished one
-/// is (a resumed `schrl train` cut off in this stage), else trained there anew.
+/// The check a run's general controller passes before the run builds on it, when the
+/// run may train more than one ([`general_controller`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControllerCheck {
+    /// Random goals (mean actions, one episode each on the robot's open map).
+    pub goals: usize,
+    /// Seed of their starts and goals.
+    pub seed: u64,
+    /// Steps each may take.
+    pub steps: usize,
+    /// Fraction of them to reach.
+    pub bar: f64,
+}
+
+impl ControllerCheck {
+    /// 500 goals of 1000 steps, as `schrl control eval`, but from seed 7, not its 12345,
+    /// so a run does not choose its controller on the goals it is reported on; the bar
+    /// 0.95, the for controllers.
+    pub const DEFAULT: Self = Self { goals: 500, seed: 7, steps: 1000, bar: 0.95 };
+}
+
+/// The training seed of try `k` (from 0) of the general controller of a run seeded
+/// `seed`: the run's seed first, so a run with one try trains what it always did, then
+/// the seed moved by `k` golden-ratio increments of 2⁶⁴ (far from every small seed).
+pub fn try_seed(seed: u64, k: usize) -> u64 {
+    seed ^ (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
+/// The directory name in a run of try `k` (from 0): `general`, `general-2`, …
+pub fn try_dir(k: usize) -> String {
+    match k {
+        0 => store::controller::GENERAL.to_string(),
+        k => format!("{}-{}", store::controller::GENERAL, k + 1),
+    }
+}
+
+/// The general controller for `robot` of the run in `run_dir`, each try reused when a
+/// finished one with the same settings is in its directory, continued from its last
+/// checkpoint when an unfinished one is (a resumed `schrl train` cut off in this stage),
+/// else trained there anew.
+///
+/// With one try, `general/` trained from `seed`, unchecked (runs saved before tries
+/// existed). With more, each try passes [`ControllerCheck::DEFAULT`] or another is
+/// trained from a fresh start; the first to pass is kept, and if none does, the best
+/// (the first of equals). PPO on the Car now and then settles on a
+/// policy that circles one way and stalls beside half its goals (seed 2: 0.49 of
+/// random goals where the other seeds reach 0.94–1.00); a fresh start does not.
+/// The choice is written to the run's [`store::controller::GENERAL_CHOICE`]; the checks
+/// are deterministic, so a resumed run repeats it.
 pub(super) fn general_controller(
     robot: sim::Robot,
     seed: u64,
-    dir: &Path,
+    run_dir: &Path,
+    tries: usize,
     watcher: &mut dyn Watcher,
 ) -> Result<ControlTrainer, TrainError> {
-    let mut cfg = ControlConfig::for_robot(robot);
-    cfg.seed = seed;
-    controller_in(cfg, dir, watcher)
+    let config = |k: usize| {
+        let mut cfg = ControlConfig::for_robot(robot);
+        cfg.seed = try_seed(seed, k);
+        cfg
+    };
+    checked_controller(&config, run_dir, tries, ControllerCheck::DEFAULT, watcher)
+}
+
+/// [`general_controller`] with try `k` trained as `config(k)` says and `check` as the
+/// check.
+fn checked_controller(
+    config: &dyn Fn(usize) -> ControlConfig,
+    run_dir: &Path,
+    tries: usize,
+    check: ControllerCheck,
+    watcher: &mut dyn Watcher,
+) -> Result<ControlTrainer, TrainError> {
+    use crate::run::evaluate::{GoalDraw, evaluate_controller};
+    use store::controller::{GeneralChoice, GeneralTry};
+    if tries <= 1 {
+        return controller_in(config(0), &run_dir.join(try_dir(0)), watcher);
+    }
+    let mut choice = GeneralChoice { tries: vec![], kept: 0 };
+    let mut kept: Option<ControlTrainer> = None;
+    for k in 0..tries {
+        let cfg = config(k);
+        let t = controller_in(cfg.clone(), &run_dir.join(try_dir(k)), watcher)?;
+        let map = crate::control::trainer::open_map(cfg.robot);
+        let eval = evaluate_controller(
+            &t.controller(),
+            &map,
+            check.goals,
+            check.seed,
+            check.steps,
+            GoalDraw::Anywhere,
+        )?;
+        let passed = eval.success_rate >= check.bar;
+        let bar = check.bar;
+        watcher.note(&format!(
+            "general controller {}: reached {:.3} of {} check goals{}",
+            try_dir(k),
+            eval.success_rate,
+            check.goals,
+            match (passed, k + 1 < tries) {
+                (true, _) => String::new(),
+                (false, true) => format!(" (below {bar}): training another from a fresh start"),
+                (false, false) => format!(" (below {bar}; the last of {tries} tries)"),
+            }
+        ));
+        let check = eval;
+        let best = choice.tries.get(choice.kept).map_or(f64::NEG_INFINITY, |b| b.success_rate);
+        if check.success_rate > best {
+            choice.kept = k;
+            kept = Some(t);
+        }
+        choice.tries.push(GeneralTry { dir: try_dir(k), seed: cfg.seed, success_rate: check.success_rate });
+        if passed {
+            break;
+        }
+    }
+    if choice.kept + 1 != choice.tries.len() {
+        watcher.note(&format!("general controller: keeping {}, the best checked", try_dir(choice.kept)));
+    }
+    store::controller::save_general_choice(run_dir, &choice)?;
+    Ok(kept.expect("at least one try"))
 }
 
 /// The controller of `cfg` in `dir`, as [`general_controller`] finds or trains it.
@@ -251,6 +360,72 @@ mod tests {
 
     fn files(dir: &Path) -> std::collections::BTreeMap<String, store::FileEntry> {
         Checkpoint::open(dir, RunKind::Controller).unwrap().manifest().files.clone()
+    }
+
+    /// Try `k` of a tiny Point controller from seed 3.
+    fn tiny_try(k: usize) -> ControlConfig {
+        ControlConfig { seed: try_seed(3, k), ..tiny() }
+    }
+
+    /// A check of 20 short episodes that asks `bar` of them.
+    fn check(bar: f64) -> ControllerCheck {
+        ControllerCheck { goals: 20, seed: 7, steps: 50, bar }
+    }
+
+    #[test]
+    fn a_run_with_one_try_trains_the_general_controller_from_its_own_seed_unchecked() {
+        assert_eq!(try_seed(3, 0), 3, "the first try is the run's seed");
+        assert!((1..4).all(|k| try_seed(3, k) != 3 && try_seed(3, k) != try_seed(3, k - 1)));
+        let scratch = tempfile::tempdir().unwrap();
+        let mut w = watcher(None);
+        checked_controller(&tiny_try, scratch.path(), 1, check(1.0), &mut w).unwrap();
+        assert_eq!(w.updates, 6);
+        assert!(!w.notes.iter().any(|n| n.contains("check goals")), "{:?}", w.notes);
+        assert!(store::controller::load_general_choice(scratch.path()).unwrap().is_none());
+        assert_eq!(
+            store::controller::kept_general_dir(scratch.path()).unwrap(),
+            scratch.path().join("general")
+        );
+    }
+
+    /// A controller below the check's bar is not built on while tries remain: another
+    /// is trained from a fresh start, and if none passes the best is kept; a resumed
+    /// run repeats the choice without training again.
+    #[test]
+    fn a_general_controller_below_the_check_is_trained_again_and_the_best_kept() {
+        let scratch = tempfile::tempdir().unwrap();
+        let run = scratch.path();
+        let mut w = watcher(None);
+        let kept = checked_controller(&tiny_try, run, 3, check(1.0), &mut w).unwrap();
+        assert_eq!(w.updates, 18, "three tries of six updates");
+        let choice = store::controller::load_general_choice(run).unwrap().expect("written");
+        let dirs: Vec<&str> = choice.tries.iter().map(|t| t.dir.as_str()).collect();
+        assert_eq!(dirs, ["general", "general-2", "general-3"]);
+        assert_eq!(
+            choice.tries.iter().map(|t| t.seed).collect::<Vec<_>>(),
+            (0..3).map(|k| try_seed(3, k)).collect::<Vec<_>>()
+        );
+        let best = choice.tries.iter().map(|t| t.success_rate).fold(f64::NEG_INFINITY, f64::max);
+        assert_eq!(choice.kept, choice.tries.iter().position(|t| t.success_rate == best).unwrap());
+        let dir = store::controller::kept_general_dir(run).unwrap();
+        assert_eq!(dir, run.join(&choice.tries[choice.kept].dir));
+        assert_eq!(
+            store::controller::load(&dir).unwrap().policy.params,
+            kept.policy.params,
+            "the kept one is returned"
+        );
+        assert!(w.notes.iter().any(|n| n.contains("training another from a fresh start")), "{:?}", w.notes);
+
+        let mut again = watcher(None);
+        checked_controller(&tiny_try, run, 3, check(1.0), &mut again).unwrap();
+        assert_eq!(again.updates, 0, "every try reused");
+        assert_eq!(store::controller::load_general_choice(run).unwrap(), Some(choice));
+
+        // A controller that passes is kept at once.
+        let other = tempfile::tempdir().unwrap();
+        checked_controller(&tiny_try, other.path(), 3, check(0.0), &mut watcher(None)).unwrap();
+        let choice = store::controller::load_general_choice(other.path()).unwrap().unwrap();
+        assert_eq!((choice.tries.len(), choice.kept), (1, 0));
     }
 
     /// Regression: `schrl train` trained its general controller (18–45 minutes for the

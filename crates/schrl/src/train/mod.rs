@@ -433,7 +433,7 @@ fn first_checkpoint(
             }
             c
         }
-        None => controller::general_controller(s.robot, s.seed, &run.dir().join("general"), watcher)?,
+        None => controller::general_controller(s.robot, s.seed, run.dir(), s.controller_tries, watcher)?,
     };
     let mut t = JointTrainer::new(task, s.joint.clone(), s.cpg, control)?;
     let dir = run.dir().join(store::pretrain::PRETRAIN);

@@ -20,6 +20,11 @@
 //!   when turned hard and still grips sideways when its wheels spin.
 //! * The caster rolls freely; its ball-joint damping makes a rolling drag
 //!   `c_c v / r²`.
+//! * Accelerating moves load from the caster onto the wheels (braking, the other
+//!   way): `m a h / L` with the centre of mass `h` = 0.089 m up and the contacts `L` =
+//!   0.2 m apart, settling with a time constant of 0.2 s. Without it the wheels held
+//!   their static grip and the sliding caster ate most of it: from rest the car took
+//!   20 steps to top speed where MuJoCo's takes 8.
 //!
 //! | parameter | value | source |
 //! |---|---|---|
@@ -29,6 +34,8 @@
 //! | wheel / caster joint damping | 0.001 | car.xml default |
 //! | friction μ | 1 | MuJoCo default |
 //! | loads | 0.268 m g per wheel, 0.463 m g caster | static balance about the centre of mass, 7.4 mm behind the centre (car.xml geometry) |
+//! | load transfer | `m a` × 0.089 / 0.2 from the caster to the wheels | centre of mass height (car.xml geometry) over the wheel–caster distance |
+//! | its settling time | 0.2 s | fitted to the MuJoCo twin's acceleration from rest |
 //! | collision shape | disc of radius 0.2 m (chassis with bumpers) | car.xml geometry |
 //! | reach radius | 0.3 m | reference setup |
 //!
@@ -81,6 +88,23 @@ const COM_X: f64 = {
     }
     mx / m
 };
+/// Height of the centre of mass above the ground (m): the chassis, bumpers and
+/// connectors at the body origin (0.1 m up), the wheels' and caster's centres at
+/// 0.05 m (`car.xml` geometry, density 5), 0.089 m.
+const COM_Z: f64 = {
+    const D: f64 = 5.0;
+    const PI: f64 = std::f64::consts::PI;
+    let low = 2.0 * D * PI * 0.05 * 0.05 * 0.05 + D * 4.0 / 3.0 * PI * 0.05 * 0.05 * 0.05;
+    (0.1 * (MASS - low) + 0.05 * low) / MASS
+};
+/// Load moved from the caster onto the wheels per newton of forward ground force:
+/// the ground forces act `COM_Z` below the centre of mass, and their moment is carried
+/// by the contacts `CASTER_X − WHEEL_X` apart.
+const LOAD_TRANSFER: f64 = COM_Z / (CASTER_X - WHEEL_X);
+/// The fraction of the way to its new load transfer the chassis moves in one physics
+/// step: `DT / τ` with τ = 0.2 s, the chassis settling on its contacts, fitted to the
+/// MuJoCo twin's acceleration from rest (README, *Fidelity of the native Car*).
+const SETTLE: f64 = DT / 0.2;
 /// Static balance about the centre of mass: the wheels (at `WHEEL_X`) and the caster
 /// (at `CASTER_X`) share the weight in inverse proportion to their distances from it.
 /// MuJoCo's contact forces at rest agree to 4 digits (0.537 on the wheels).
@@ -100,10 +124,6 @@ const DT_M: f64 = DT * INV_MASS;
 const DT_I: f64 = DT * INV_INERTIA;
 /// A wheel's rolling damping seen at the ground: `c_w / r²` (N per m/s).
 const ROLL_DAMPING: f64 = WHEEL_DAMPING * INV_WHEEL_RADIUS * INV_WHEEL_RADIUS;
-/// Friction a wheel can transmit: `μ N`.
-const WHEEL_GRIP: f64 = MU * WHEEL_LOAD;
-/// Friction the caster can transmit: `μ N`.
-const CASTER_GRIP: f64 = MU * CASTER_LOAD;
 
 /// The Car's state.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -124,6 +144,10 @@ pub struct Car {
     pub caster_rate: [f64; 3],
     /// Acceleration over the last physics step (world frame).
     pub accel: [f64; 2],
+    /// Load (N) the last physics step's forward acceleration moved from the caster
+    /// onto the wheels (negative when braking); see [`Car`]'s module notes.
+    #[serde(default)]
+    pub load_shift: f64,
 }
 
 impl Default for Car {
@@ -137,6 +161,7 @@ impl Default for Car {
             caster: Quat::IDENTITY,
             caster_rate: [0.0; 3],
             accel: [0.0; 2],
+            load_shift: 0.0,
         }
     }
 }
@@ -150,6 +175,8 @@ struct Planar {
     l: f64,
     w: f64,
     heading: Heading,
+    /// [`Car::load_shift`].
+    shift: f64,
 }
 
 impl Planar {
@@ -169,16 +196,23 @@ fn rolling_traction(drive: [f64; 2], u: f64, w: f64) -> [f64; 2] {
     [(drive[0] + turn) - roll, (drive[1] - turn) - roll]
 }
 
+/// The friction (wheel, caster) each contact can transmit, `μ N`, with `shift` of the
+/// load moved from the caster onto the wheels.
+#[inline]
+fn grips(shift: f64) -> (f64, f64) {
+    (MU * (WHEEL_LOAD + 0.5 * shift), MU * (CASTER_LOAD - shift))
+}
+
 /// A wheel's ground force (along, across) and whether it slips: the force that keeps
 /// it rolling without sliding (`along`, `across`), or, when that exceeds the friction
-/// disc `μ N`, the same force scaled onto the disc (friction against the slip the
-/// contact would otherwise have, as a velocity-level contact solver finds it).
+/// disc `grip` (`μ N`), the same force scaled onto the disc (friction against the slip
+/// the contact would otherwise have, as a velocity-level contact solver finds it).
 #[inline]
-fn wheel_force(along: f64, across: f64) -> (f64, f64, bool) {
+fn wheel_force(along: f64, across: f64, grip: f64) -> (f64, f64, bool) {
     let n2 = along * along + across * across;
     // Branch-free: while driving at random, rolling and slipping alternate too often
     // for a branch to be predicted.
-    let k = (WHEEL_GRIP / n2.sqrt()).min(1.0);
+    let k = (grip / n2.sqrt()).min(1.0);
     (k * along, k * across, k < 1.0)
 }
 
@@ -191,11 +225,12 @@ fn wheel_force(along: f64, across: f64) -> (f64, f64, bool) {
 /// operations, so sums are written with the operand that is ready last added last.
 #[inline]
 fn substep(st: Planar, drive: [f64; 2]) -> Planar {
-    let Planar { mut pos, u, l, w, mut heading } = st;
+    let Planar { mut pos, u, l, w, mut heading, shift } = st;
+    let (wheel_grip, caster_grip) = grips(shift);
     let roll = rolling_traction(drive, u, w);
     // Caster rolling drag `c_c v / r²`, bounded by its friction.
     let cl = l + CASTER_X * w;
-    let k = CASTER_DRAG.min(CASTER_GRIP / (u * u + cl * cl).sqrt());
+    let k = CASTER_DRAG.min(caster_grip / (u * u + cl * cl).sqrt());
     let (fcu, fcl) = (-k * u, -k * cl);
     // Sideways, both wheels sit at the same x, so their contact points slide at one
     // speed, `l + x w`; the force that stops that slide within the step (after the
@@ -203,19 +238,20 @@ fn substep(st: Planar, drive: [f64; 2]) -> Planar {
     // drag is left out of it (a Jacobi step rather than Gauss–Seidel, corrected on the
     // next step): it keeps the caster's and the wheels' square roots off one
     // dependency chain (BENCHMARKS.md).
-    let est = roll.map(|f| f.clamp(-WHEEL_GRIP, WHEEL_GRIP));
+    let est = roll.map(|f| f.clamp(-wheel_grip, wheel_grip));
     let stop = -(LATERAL_MASS / DT) * (l + WHEEL_X * w)
         - (LATERAL_MASS * WHEEL_X * DT_I * WHEEL_Y / DT) * (est[1] - est[0]);
     // Each wheel's friction disc bounds both together: a wheel spinning under full
     // torque still holds sideways (MuJoCo's car turns on the spot at 1.3 rad/s;
     // giving traction priority, as this model once did, left nothing sideways and
     // it spun at 6.17).
-    let (left, left_across, _) = wheel_force(roll[0], 0.5 * stop);
-    let (right, right_across, _) = wheel_force(roll[1], 0.5 * stop);
+    let (left, left_across, _) = wheel_force(roll[0], 0.5 * stop, wheel_grip);
+    let (right, right_across, _) = wheel_force(roll[1], 0.5 * stop, wheel_grip);
     let l_mid = l + DT_M * fcl;
     let w_spin = w + DT_I * CASTER_X * fcl;
     let across = left_across + right_across;
-    let u_new = (u + DT_M * fcu) + DT_M * (left + right);
+    let forward = fcu + (left + right);
+    let u_new = u + DT_M * forward;
     let l_new = l_mid + DT_M * across;
     let w_new = (w_spin + DT_I * WHEEL_Y * (right - left)) + DT_I * WHEEL_X * across;
     let [vx, vy] = heading.to_world([u_new, l_new]);
@@ -224,7 +260,12 @@ fn substep(st: Planar, drive: [f64; 2]) -> Planar {
     // Turning the frame leaves the world velocity unchanged: its body-frame
     // components rotate back by the same angle.
     let (s, c) = heading.rotate(w * DT);
-    Planar { pos, u: c * u_new + s * l_new, l: -s * u_new + c * l_new, w: w_new, heading }
+    // The forward force pitches the chassis onto the wheels (braking, onto the
+    // caster); the loads settle towards that within `SETTLE`'s time constant, and
+    // the next step's grips carry them (no contact's load below zero).
+    let target = (LOAD_TRANSFER * forward).clamp(-2.0 * WHEEL_LOAD, CASTER_LOAD);
+    let shift = shift + SETTLE * (target - shift);
+    Planar { pos, u: c * u_new + s * l_new, l: -s * u_new + c * l_new, w: w_new, heading, shift }
 }
 
 impl Dynamics for Car {
@@ -252,7 +293,8 @@ impl Dynamics for Car {
         let mut guard = ContactGuard::new(map, &self.pos, RADIUS);
         let mut collided = false;
         let [u, l] = self.heading.to_body(self.vel);
-        let mut st = Planar { pos: self.pos, u, l, w: self.yaw_rate, heading: self.heading };
+        let mut st =
+            Planar { pos: self.pos, u, l, w: self.yaw_rate, heading: self.heading, shift: self.load_shift };
         let mut before = self.vel;
         for _ in 0..SUBSTEPS {
             before = st.world_vel();
@@ -268,13 +310,15 @@ impl Dynamics for Car {
         self.vel = st.world_vel();
         self.yaw_rate = st.w;
         self.heading = st.heading;
+        self.load_shift = st.shift;
         // Wheel spin: rolling with the ground, or, slipping, where the motor's torque
         // balances the damping and the ground's force (the sideways share estimated
         // as zero: a state read-out, not fed back).
         let roll = rolling_traction(drive, st.u, st.w);
+        let (wheel_grip, _) = grips(st.shift);
         for i in 0..2 {
             let v_long = st.u - st.w * [WHEEL_Y, -WHEEL_Y][i];
-            let (along, _, slips) = wheel_force(roll[i], 0.0);
+            let (along, _, slips) = wheel_force(roll[i], 0.0, wheel_grip);
             self.wheel_speed[i] = if slips {
                 (torque[i] - WHEEL_RADIUS * along) * INV_WHEEL_DAMPING
             } else {
