@@ -241,7 +241,7 @@ pub struct JointRunSettings {
     /// trained into the run's `general/`.
     pub controller: Option<std::path::PathBuf>,
     /// General controllers the run may train before it keeps one
-    /// ([`crate::train::controller::general_controller`]): with more than one, each is
+    /// (`schrl train`'s first stage; [`crate::train::controller::ControllerCheck`]): with more than one, each is
     /// checked on random goals and a fresh one trained while they fall short. 1 (runs
     /// saved before it existed): one, unchecked. Default: [`DEFAULT_CONTROLLER_TRIES`].
     #[serde(default = "one")]

@@ -135,7 +135,7 @@ impl ControllerSession {
 }
 
 /// The check a run's general controller passes before the run builds on it, when the
-/// run may train more than one ([`general_controller`]).
+/// run may train more than one (`schrl train`'s general controller stage).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ControllerCheck {
     /// Random goals (mean actions, one episode each on the robot's open map).
