@@ -563,7 +563,7 @@ fn native_car_follows_its_mujoco_twin() {
         let [n, t] = car_vs_twin(0, 1000, |_| a);
         assert!(close(n[1], t[1], 0.15), "spin {a:?}: native {} rad/s, MuJoCo {}", n[1], t[1]);
     }
-    // One wheel driven: turning radius 0.208 m against 0.230; yaw rate 0.82 against
+    // One wheel driven: turning radius 0.207 m against 0.230; yaw rate 0.82 against
     // 0.64 rad/s (MuJoCo's light car chatters on its contacts and loses grip).
     for a in [[0.0, 1.0], [1.0, 0.0]] {
         let [n, t] = car_vs_twin(0, 1000, |_| a);

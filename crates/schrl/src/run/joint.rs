@@ -314,7 +314,7 @@ pub fn default_reach(robot: sim::Robot) -> Reach {
 pub const DEFAULT_SAVE_EVERY: usize = 50;
 /// General controllers a run may train by default before it keeps one
 /// ([`JointRunSettings::controller_tries`]): this project's, not the paper's (README,
-/// *The Car's controller check*).
+/// *The Car accelerates as its twin does* under *Car and Drone*).
 pub const DEFAULT_CONTROLLER_TRIES: usize = 3;
 /// The planner's extra clearance by default: one Point radius (README, *Joint training
 /// (Algorithm 1) and results*).

@@ -239,13 +239,11 @@ fn checked_controller(
                 (false, false) => format!(" (below {bar}; the last of {tries} tries)"),
             }
         ));
-        let check = eval;
-        let best = choice.tries.get(choice.kept).map_or(f64::NEG_INFINITY, |b| b.success_rate);
-        if check.success_rate > best {
+        if choice.tries.get(choice.kept).is_none_or(|best| eval.success_rate > best.success_rate) {
             choice.kept = k;
             kept = Some(t);
         }
-        choice.tries.push(GeneralTry { dir: try_dir(k), seed: cfg.seed, success_rate: check.success_rate });
+        choice.tries.push(GeneralTry { dir: try_dir(k), seed: cfg.seed, success_rate: eval.success_rate });
         if passed {
             break;
         }
