@@ -135,8 +135,9 @@ fn table1_runs_doggo_at_quick_size() {
     assert_eq!(r["robot"], "doggo");
     assert!(r["rows"]["schrl"]["satisfaction"].is_number(), "{r}");
     assert!(out.join("table1.png").exists());
-    // The Doggo's defaults: its controller observes and pays for its track, and so
-    // does the joint phase (README, *The track in the controller's observation*); the
+    // The Doggo's defaults: its controller observes and pays for its track, and the
+    // joint phase pays three times as much (README, *The track in the controller's
+    // observation*, *A heavier off-track weight in the joint phase*); the
     // run deploys its best validated checkpoint (*Selecting the deployed checkpoint*).
     let manifests = manifests_under(out);
     let kind = |k: &str| manifests.iter().filter(move |m| m["kind"] == k).collect::<Vec<_>>();
@@ -146,7 +147,7 @@ fn table1_runs_doggo_at_quick_size() {
         assert_eq!(m["settings"]["off_track_weight"], 0.1, "{m}");
     }
     for m in kind("joint") {
-        assert_eq!(m["settings"]["joint"]["off_track_weight"], 0.1, "{m}");
+        assert_eq!(m["settings"]["joint"]["off_track_weight"], 0.3, "{m}");
         assert_eq!(m["settings"]["select_every"], 250_000, "{m}");
     }
 }

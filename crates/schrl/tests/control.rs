@@ -264,9 +264,10 @@ fn an_option_chases_one_goal_and_each_reach_ends_its_episode() {
     assert!(ControlTrainer::new(off).err().expect("refused").to_string().contains("goal"));
 }
 
-/// The Doggo alone observes and pays for its track by default (README, *The track in
-/// the controller's observation*); the other robots keep the paper's reward and
-/// observation.
+/// The Doggo alone observes and pays for its track by default, 0.1 a metre in
+/// controller training and 0.3 in the joint phase (README, *The track in the
+/// controller's observation*, *A heavier off-track weight in the joint phase*); the
+/// other robots keep the paper's reward and observation.
 #[test]
 fn only_the_doggo_observes_and_pays_for_its_track_by_default() {
     for robot in Robot::ALL {
@@ -274,5 +275,7 @@ fn only_the_doggo_observes_and_pays_for_its_track_by_default() {
         let doggo = robot == Robot::Doggo;
         assert_eq!(c.observe_track, doggo, "{robot:?}");
         assert_eq!(c.off_track_weight, if doggo { 0.1 } else { 0.0 }, "{robot:?}");
+        let joint = schrl::control::TrackDefaults::for_robot(robot).joint_off_track_weight;
+        assert_eq!(joint, if doggo { 0.3 } else { 0.0 }, "{robot:?}");
     }
 }

@@ -127,7 +127,7 @@ pub struct TrainArgs {
     #[arg(long, value_name = "radius|in-goal")]
     reach: Option<Reach>,
     /// Reward the joint phase's controller loses per step per metre it strays from the
-    /// planned segment it drives (0: the paper's reward) [default: 0.1 for the Doggo, 0
+    /// planned segment it drives (0: the paper's reward) [default: 0.3 for the Doggo, 0
     /// for the others].
     #[arg(long)]
     off_track_weight: Option<f64>,

@@ -368,7 +368,7 @@ impl JointRunSettings {
                 goal_margin,
                 safe_margin: DEFAULT_SAFE_MARGIN,
                 off_track_weight: crate::control::trainer::TrackDefaults::for_robot(task.robot)
-                    .off_track_weight,
+                    .joint_off_track_weight,
                 turn_margin: default_turn_margin(task.robot),
                 reach: default_reach(task.robot),
                 ..JointConfig::default()
