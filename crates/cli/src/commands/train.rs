@@ -131,6 +131,10 @@ pub struct TrainArgs {
     /// for the others].
     #[arg(long)]
     off_track_weight: Option<f64>,
+    /// Reward the joint phase's controller loses on the step its robot falls (0: the
+    /// paper's reward) [default: 0].
+    #[arg(long, value_name = "R")]
+    fall_penalty: Option<f64>,
     /// Weight per metre of the path-length term the planner follows in the joint phase
     /// [default: 0.05].
     #[arg(long)]
@@ -234,6 +238,7 @@ impl TrainArgs {
         set(&mut j.follow, self.follow);
         set(&mut j.reach, self.reach);
         set(&mut j.off_track_weight, self.off_track_weight);
+        set(&mut j.fall_penalty, self.fall_penalty);
         set(&mut j.length_weight, self.length_weight);
         j.freeze_planner = self.freeze_planner;
         j.freeze_controller = self.freeze_controller;
@@ -345,6 +350,7 @@ impl TrainArgs {
                 ("--follow", differs(&self.follow, &saved.joint.follow)),
                 ("--reach", differs(&self.reach, &saved.joint.reach)),
                 ("--off-track-weight", differs(&self.off_track_weight, &saved.joint.off_track_weight)),
+                ("--fall-penalty", differs(&self.fall_penalty, &saved.joint.fall_penalty)),
                 ("--length-weight", differs(&self.length_weight, &saved.joint.length_weight)),
                 ("--anchor-weight", differs(&self.anchor_weight, &saved.joint.anchor_weight)),
                 ("--anchor-on", differs(&self.anchor_on, &saved.joint.anchor_on)),

@@ -74,7 +74,7 @@ pub struct ControlConfig {
     pub observe_track: bool,
 }
 
-fn is_zero(x: &f64) -> bool {
+pub(crate) fn is_zero(x: &f64) -> bool {
     *x == 0.0
 }
 

@@ -19,10 +19,20 @@ pub trait Driver {
     /// `live`: which runs are still going) into `actions` (`n × act_dim`).
     fn act(&mut self, raw: &[f64], live: &[bool], actions: &mut [f64]);
 
-    /// After every live environment stepped: each one's reward, its distance (m) from
-    /// the planned segment it was driving in this step (both 0 for runs already over),
-    /// and whether its run ended in this step.
-    fn after_step(&mut self, _live: &[bool], _rewards: &mut [f64], _off_track: &[f64], _ended: &[bool]) {}
+    /// After every live environment stepped: each one's reward (0 for runs already
+    /// over) and what else its step reported.
+    fn after_step(&mut self, _live: &[bool], _rewards: &mut [f64], _step: &StepReports<'_>) {}
+}
+
+/// What every environment's step reported besides its reward, one entry per run
+/// (0 or `false` for runs already over).
+pub struct StepReports<'a> {
+    /// Distance (m) from the planned segment it was driving in this step.
+    pub off_track: &'a [f64],
+    /// Its run ended in this step.
+    pub ended: &'a [bool],
+    /// Its robot fell in this step (legged robots only).
+    pub fell: &'a [bool],
 }
 
 /// A trained controller's mean actions: how deployed runs and evaluations drive.
@@ -107,6 +117,7 @@ pub(crate) fn drive_threaded(
     let mut rewards = vec![0.0; n];
     let mut off_track = vec![0.0; n];
     let mut ended = vec![false; n];
+    let mut fell = vec![false; n];
     let mut stepped: Vec<Result<Option<StepReport>, EnvError>> = Vec::with_capacity(n);
     let envs = &mut envs[..n];
     while live.iter().any(|l| *l) {
@@ -131,9 +142,14 @@ pub(crate) fn drive_threaded(
             rewards[i] = report.map_or(0.0, |r| r.reward);
             off_track[i] = report.map_or(0.0, |r| r.off_track);
             ended[i] = report.is_some_and(|r| r.ended);
+            fell[i] = report.is_some_and(|r| r.fell);
             live[i] &= !ended[i];
         }
-        driver.after_step(&before, &mut rewards, &off_track, &ended);
+        driver.after_step(
+            &before,
+            &mut rewards,
+            &StepReports { off_track: &off_track, ended: &ended, fell: &fell },
+        );
     }
     Ok(runs)
 }
@@ -148,6 +164,7 @@ struct StepReport {
     /// Distance from the segment driven in this step, measured after it.
     off_track: f64,
     ended: bool,
+    fell: bool,
 }
 
 /// Steps one run with `action` (nothing if it is over, `None`), writing its
@@ -175,7 +192,7 @@ fn step_run(
         }
         Dispatch::Done(_) => true,
     };
-    Ok(Some(StepReport { reward: step.reward, off_track, ended }))
+    Ok(Some(StepReport { reward: step.reward, off_track, ended, fell: step.fell }))
 }
 
 #[cfg(test)]
@@ -210,9 +227,9 @@ mod tests {
             }
         }
 
-        fn after_step(&mut self, _live: &[bool], rewards: &mut [f64], off_track: &[f64], _ended: &[bool]) {
+        fn after_step(&mut self, _live: &[bool], rewards: &mut [f64], step: &StepReports<'_>) {
             self.rewards.extend_from_slice(rewards);
-            self.off_track.push(off_track.to_vec());
+            self.off_track.push(step.off_track.to_vec());
         }
     }
 

@@ -32,7 +32,7 @@ use crate::control::ppo::{RolloutBuffer, UpdateStats as PpoStats};
 use crate::control::trainer::normalize_obs;
 use crate::plan::cpg::{AnchorKind, CpgConfig, PathLengthReward, PlanTrainer};
 use crate::run::RunError;
-use crate::run::episode::{Driver, drive};
+use crate::run::episode::{Driver, StepReports, drive};
 use crate::run::evaluate::reach_steps;
 use crate::run::execute::{Execution, Outcome, start_task_run, task_env};
 use crate::task::along::ExecutionSpec;
@@ -148,6 +148,13 @@ pub struct JointConfig {
     /// planned segments*).
     #[serde(default)]
     pub off_track_weight: f64,
+    /// Subtracted from the reward the joint phase's controller learns from on the
+    /// step its robot falls (before reward scaling; the runs' returns and `r_l` stay
+    /// the environment's), as [`crate::control::ControlConfig::fall_penalty`] in
+    /// controller training. 0 (the default, the paper's reward, and runs saved before
+    /// it existed): a fall costs only the return it ends. Legged robots only fall.
+    #[serde(default, skip_serializing_if = "crate::control::trainer::is_zero")]
+    pub fall_penalty: f64,
     /// When the executing robot counts a waypoint reached ([`Reach`]): within the
     /// reach radius (the paper's; the default but for the Drone, [`default_reach`], and
     /// runs saved before it existed) or, as well, inside the goals that hold the
@@ -157,14 +164,18 @@ pub struct JointConfig {
 }
 
 impl JointConfig {
-    /// Errors unless [`JointConfig::off_track_weight`] is a finite number ≥ 0.
-    fn check_off_track_weight(&self) -> Result<(), String> {
-        let w = self.off_track_weight;
-        if w >= 0.0 && w.is_finite() {
-            Ok(())
-        } else {
-            Err(format!("must be a finite number ≥ 0 (reward per metre off the segment per step), got {w}"))
+    /// Errors, naming the key, unless [`JointConfig::off_track_weight`] and
+    /// [`JointConfig::fall_penalty`] are finite numbers ≥ 0.
+    fn check_reward_terms(&self) -> Result<(), (&'static str, String)> {
+        for (key, value, unit) in [
+            ("off_track_weight", self.off_track_weight, "reward per metre off the segment per step"),
+            ("fall_penalty", self.fall_penalty, "reward lost on the step the robot falls"),
+        ] {
+            if !(value >= 0.0 && value.is_finite()) {
+                return Err((key, format!("must be a finite number ≥ 0 ({unit}), got {value}")));
+            }
         }
+        Ok(())
     }
 
     /// The task the planner plans for: `task` with the goal margin, the obstacle
@@ -205,6 +216,7 @@ impl Default for JointConfig {
             neural_obstacle: None,
             follow: Follow::Waypoints,
             off_track_weight: 0.0,
+            fall_penalty: 0.0,
             reach: Reach::Radius,
         }
     }
@@ -460,7 +472,7 @@ impl JointRunSettings {
                 return Err(bad(name, format!("must be a non-negative number of metres, got {metres}")));
             }
         }
-        j.check_off_track_weight().map_err(|m| bad("off_track_weight", m))?;
+        j.check_reward_terms().map_err(|(key, m)| bad(key, m))?;
         if let Some(net) = &j.neural_obstacle {
             net.check().map_err(|m| bad("neural_obstacle", m))?;
         }
@@ -544,6 +556,8 @@ struct Learner<'a> {
     learn: bool,
     /// [`JointConfig::off_track_weight`].
     off_track_weight: f64,
+    /// [`JointConfig::fall_penalty`].
+    fall_penalty: f64,
     cache: PolicyCache,
     x: Vec<f32>,
     actions: Vec<f32>,
@@ -598,15 +612,21 @@ impl Driver for Learner<'_> {
         actions.iter_mut().zip(&self.actions).for_each(|(d, s)| *d = *s as f64);
     }
 
-    fn after_step(&mut self, live: &[bool], rewards: &mut [f64], off_track: &[f64], ended: &[bool]) {
+    fn after_step(&mut self, live: &[bool], rewards: &mut [f64], step: &StepReports<'_>) {
         if !self.learn {
             return;
         }
         if self.off_track_weight > 0.0 {
-            for (r, d) in rewards.iter_mut().zip(off_track) {
+            for (r, d) in rewards.iter_mut().zip(step.off_track) {
                 *r -= self.off_track_weight * d;
             }
         }
+        if self.fall_penalty > 0.0 {
+            for (r, _) in rewards.iter_mut().zip(step.fell).filter(|(_, fell)| **fell) {
+                *r -= self.fall_penalty;
+            }
+        }
+        let ended = step.ended;
         let (od, ad) = (self.control.policy.obs_dim(), self.control.policy.act_dim());
         for (i, run) in self.runs.iter_mut().enumerate().filter(|(i, _)| live[*i]) {
             run.obs.extend_from_slice(&self.x[i * od..(i + 1) * od]);
@@ -705,9 +725,7 @@ impl JointTrainer {
                 });
             }
         }
-        config
-            .check_off_track_weight()
-            .map_err(|message| RunError::Setting { key: "off_track_weight", message })?;
+        config.check_reward_terms().map_err(|(key, message)| RunError::Setting { key, message })?;
         let task = Task { follow: config.follow, reach: config.reach, ..task };
         let mut control = control;
         if config.control_target_kl.is_some() {
@@ -825,6 +843,7 @@ impl JointTrainer {
             scaler: &mut self.scaler,
             learn,
             off_track_weight: self.config.off_track_weight,
+            fall_penalty: self.config.fall_penalty,
             cache: PolicyCache::default(),
             x: Vec::new(),
             actions: Vec::new(),
@@ -900,4 +919,46 @@ pub fn leave_one_out(r: &[f64], group: usize) -> Vec<f64> {
             g.iter().map(move |x| if g.len() > 1 { x - (sum - x) / others } else { 0.0 })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::ControlConfig;
+
+    /// The off-track weight comes off the reward the joint phase's controller learns
+    /// from in proportion to the distance, and the fall penalty on the step its robot
+    /// falls and on no other.
+    #[test]
+    fn learner_takes_the_off_track_weight_and_the_fall_penalty_from_the_learned_reward() {
+        let mut cfg = ControlConfig::for_robot(Robot::Point);
+        cfg.ppo.norm_reward = false;
+        let mut control = ControlTrainer::new(cfg).unwrap();
+        let (od, ad) = (control.policy.obs_dim(), control.policy.act_dim());
+        let mut scaler = RewardScaler::new(3, 0.99);
+        let mut learner = Learner {
+            control: &mut control,
+            scaler: &mut scaler,
+            learn: true,
+            off_track_weight: 0.5,
+            fall_penalty: 7.0,
+            cache: PolicyCache::default(),
+            x: Vec::new(),
+            actions: Vec::new(),
+            log_probs: Vec::new(),
+            values: Vec::new(),
+            runs: (0..3).map(|_| Transitions::default()).collect(),
+        };
+        let live = [true; 3];
+        learner.act(&vec![0.1; 3 * od], &live, &mut vec![0.0; 3 * ad]);
+        let mut rewards = [1.0; 3];
+        let step = StepReports {
+            off_track: &[0.0, 0.2, 0.0],
+            ended: &[false, false, true],
+            fell: &[false, false, true],
+        };
+        learner.after_step(&live, &mut rewards, &step);
+        let learned: Vec<f32> = learner.runs.iter().map(|r| r.rewards[0]).collect();
+        assert_eq!(learned, [1.0, 0.9, -6.0]);
+    }
 }
