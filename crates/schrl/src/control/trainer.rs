@@ -78,6 +78,40 @@ pub(crate) fn is_zero(x: &f64) -> bool {
     *x == 0.0
 }
 
+/// What this project may take off the environment's reward before PPO learns from it,
+/// in controller training ([`ControlConfig`]) and in the joint phase
+/// ([`crate::run::joint::JointConfig`]) alike; both 0 is the paper's reward.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct RewardTerms {
+    /// Taken on the step the robot falls.
+    pub fall_penalty: f64,
+    /// Taken per metre the robot is off its track, every step.
+    pub off_track_weight: f64,
+}
+
+impl RewardTerms {
+    /// The reward learned from a step of `reward` that ended `off_track` metres from
+    /// the track (read only when the weight is above 0).
+    pub fn learned(&self, reward: f64, fell: bool, off_track: impl FnOnce() -> f64) -> f64 {
+        let mut r = reward - if fell { self.fall_penalty } else { 0.0 };
+        if self.off_track_weight > 0.0 {
+            r -= self.off_track_weight * off_track();
+        }
+        r
+    }
+
+    /// Errors with the key and what is wrong unless both are finite numbers ≥ 0.
+    pub fn check(&self) -> Result<(), (&'static str, String)> {
+        for (key, value) in [("fall_penalty", self.fall_penalty), ("off_track_weight", self.off_track_weight)]
+        {
+            if !(value >= 0.0 && value.is_finite()) {
+                return Err((key, format!("must be a finite number ≥ 0, got {value}")));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A share of a goal-conditioned controller's random goals drawn near the robot.
 ///
 /// Goals drawn anywhere on the map are rarely within a metre of the robot, yet a
@@ -104,6 +138,11 @@ pub struct NearGoals {
 }
 
 impl ControlConfig {
+    /// Its fall penalty and off-track weight, as the reward learned from takes them.
+    pub(crate) fn reward_terms(&self) -> RewardTerms {
+        RewardTerms { fall_penalty: self.fall_penalty, off_track_weight: self.off_track_weight }
+    }
+
     /// Defaults for `robot`: its open map, the reference PPO preset, and a step
     /// budget that reaches ≥ 95 % success (measured; see the README's results).
     pub fn for_robot(robot: Robot) -> Self {
@@ -287,13 +326,7 @@ impl ControlTrainer {
                 "near_goals: fraction must be in [0, 1] and within a positive number of metres, got {n:?}"
             )));
         }
-        for (key, value) in
-            [("fall_penalty", config.fall_penalty), ("off_track_weight", config.off_track_weight)]
-        {
-            if !(value >= 0.0 && value.is_finite()) {
-                return Err(ControlError::Config(format!("{key} must be a finite number ≥ 0, got {value}")));
-            }
-        }
+        config.reward_terms().check().map_err(|(key, m)| ControlError::Config(format!("{key} {m}")))?;
         if let Some(g) = &config.goal {
             let (low, high) = map.region();
             let inside = g.len() == map.dim()
@@ -412,6 +445,7 @@ impl ControlTrainer {
         let mut log_probs = vec![0.0f32; n];
         let mut values = vec![0.0f32; n];
         let mut reports = vec![Step::default(); n];
+        let terms = self.config.reward_terms();
         let mut rewards = vec![0.0f64; n];
         let mut ends = vec![false; n];
         let mut truncated_obs: Vec<(usize, Vec<f64>)> = Vec::new();
@@ -442,12 +476,9 @@ impl ControlTrainer {
             for (i, (env, o)) in self.envs.envs_mut().iter_mut().zip(self.raw_obs.chunks_mut(od)).enumerate()
             {
                 let s = reports[i];
-                rewards[i] = s.reward - if s.fell { self.config.fall_penalty } else { 0.0 };
-                if self.config.off_track_weight > 0.0 {
-                    let off =
-                        sim::segment::point_segment_distance(env.position(), env.goal_origin(), env.goal());
-                    rewards[i] -= self.config.off_track_weight * off;
-                }
+                rewards[i] = terms.learned(s.reward, s.fell, || {
+                    sim::segment::point_segment_distance(env.position(), env.goal_origin(), env.goal())
+                });
                 self.episode_returns[i] += s.reward;
                 if s.reached {
                     reached += 1;

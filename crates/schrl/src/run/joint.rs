@@ -29,7 +29,7 @@ use crate::control::ControlTrainer;
 use crate::control::normalize::RewardScaler;
 use crate::control::policy::PolicyCache;
 use crate::control::ppo::{RolloutBuffer, UpdateStats as PpoStats};
-use crate::control::trainer::normalize_obs;
+use crate::control::trainer::{RewardTerms, normalize_obs};
 use crate::plan::cpg::{AnchorKind, CpgConfig, PathLengthReward, PlanTrainer};
 use crate::run::RunError;
 use crate::run::episode::{Driver, StepReports, drive};
@@ -164,18 +164,10 @@ pub struct JointConfig {
 }
 
 impl JointConfig {
-    /// Errors, naming the key, unless [`JointConfig::off_track_weight`] and
-    /// [`JointConfig::fall_penalty`] are finite numbers ≥ 0.
-    fn check_reward_terms(&self) -> Result<(), (&'static str, String)> {
-        for (key, value, unit) in [
-            ("off_track_weight", self.off_track_weight, "reward per metre off the segment per step"),
-            ("fall_penalty", self.fall_penalty, "reward lost on the step the robot falls"),
-        ] {
-            if !(value >= 0.0 && value.is_finite()) {
-                return Err((key, format!("must be a finite number ≥ 0 ({unit}), got {value}")));
-            }
-        }
-        Ok(())
+    /// Its fall penalty and off-track weight, as the controller's learned reward
+    /// takes them.
+    fn reward_terms(&self) -> RewardTerms {
+        RewardTerms { fall_penalty: self.fall_penalty, off_track_weight: self.off_track_weight }
     }
 
     /// The task the planner plans for: `task` with the goal margin, the obstacle
@@ -472,7 +464,7 @@ impl JointRunSettings {
                 return Err(bad(name, format!("must be a non-negative number of metres, got {metres}")));
             }
         }
-        j.check_reward_terms().map_err(|(key, m)| bad(key, m))?;
+        j.reward_terms().check().map_err(|(key, m)| bad(key, m))?;
         if let Some(net) = &j.neural_obstacle {
             net.check().map_err(|m| bad("neural_obstacle", m))?;
         }
@@ -554,10 +546,8 @@ struct Learner<'a> {
     control: &'a mut ControlTrainer,
     scaler: &'a mut RewardScaler,
     learn: bool,
-    /// [`JointConfig::off_track_weight`].
-    off_track_weight: f64,
-    /// [`JointConfig::fall_penalty`].
-    fall_penalty: f64,
+    /// [`JointConfig::off_track_weight`] and [`JointConfig::fall_penalty`].
+    terms: RewardTerms,
     cache: PolicyCache,
     x: Vec<f32>,
     actions: Vec<f32>,
@@ -616,15 +606,8 @@ impl Driver for Learner<'_> {
         if !self.learn {
             return;
         }
-        if self.off_track_weight > 0.0 {
-            for (r, d) in rewards.iter_mut().zip(step.off_track) {
-                *r -= self.off_track_weight * d;
-            }
-        }
-        if self.fall_penalty > 0.0 {
-            for (r, _) in rewards.iter_mut().zip(step.fell).filter(|(_, fell)| **fell) {
-                *r -= self.fall_penalty;
-            }
+        for (i, r) in rewards.iter_mut().enumerate() {
+            *r = self.terms.learned(*r, step.fell[i], || step.off_track[i]);
         }
         let ended = step.ended;
         let (od, ad) = (self.control.policy.obs_dim(), self.control.policy.act_dim());
@@ -725,7 +708,7 @@ impl JointTrainer {
                 });
             }
         }
-        config.check_reward_terms().map_err(|(key, message)| RunError::Setting { key, message })?;
+        config.reward_terms().check().map_err(|(key, message)| RunError::Setting { key, message })?;
         let task = Task { follow: config.follow, reach: config.reach, ..task };
         let mut control = control;
         if config.control_target_kl.is_some() {
@@ -842,8 +825,7 @@ impl JointTrainer {
             control: &mut self.control,
             scaler: &mut self.scaler,
             learn,
-            off_track_weight: self.config.off_track_weight,
-            fall_penalty: self.config.fall_penalty,
+            terms: self.config.reward_terms(),
             cache: PolicyCache::default(),
             x: Vec::new(),
             actions: Vec::new(),
@@ -940,8 +922,7 @@ mod tests {
             control: &mut control,
             scaler: &mut scaler,
             learn: true,
-            off_track_weight: 0.5,
-            fall_penalty: 7.0,
+            terms: RewardTerms { fall_penalty: 7.0, off_track_weight: 0.5 },
             cache: PolicyCache::default(),
             x: Vec::new(),
             actions: Vec::new(),
