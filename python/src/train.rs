@@ -16,7 +16,7 @@ use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watche
 use sim::Robot;
 
 /// The settings keywords of `schrl.train`: `schrl train`'s flags with `_` for `-`.
-const SETTINGS: [&str; 29] = [
+const SETTINGS: [&str; 31] = [
     "steps",
     "target",
     "controller",
@@ -35,12 +35,14 @@ const SETTINGS: [&str; 29] = [
     "runs_per_start",
     "control_weight",
     "length_weight",
+    "turn_weight",
     "anchor_weight",
     "anchor_on",
     "plan_step_limit",
     "freeze_controller",
     "goal_margin",
     "safe_margin",
+    "turn_margin",
     "obstacle_sdf",
     "eval_groups",
     "save_every",
@@ -85,12 +87,14 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
         "runs_per_start" => set(&mut j.runs_per_start, count()?),
         "control_weight" => set(&mut j.control_weight, number()?),
         "length_weight" => set(&mut j.length_weight, number()?),
+        "turn_weight" => set(&mut j.turn_weight, number()?),
         "anchor_weight" => set(&mut j.anchor_weight, number()?),
         "anchor_on" => set(&mut j.anchor_on, parsed::<AnchorKind>(key, &text()?)?),
         "plan_step_limit" => set(&mut j.plan_step_limit, number()?),
         "freeze_controller" => set(&mut j.freeze_controller, flag()?),
         "goal_margin" => set(&mut j.goal_margin, number()?),
         "safe_margin" => set(&mut j.safe_margin, number()?),
+        "turn_margin" => set(&mut j.turn_margin, number()?),
         // `schrl train --obstacle-sdf`: the neural SDF (a `schrl sdf fit` file) the planner sees.
         "obstacle_sdf" => {
             let path = value.extract::<PathBuf>().map_err(|_| get("a path"))?;

@@ -567,21 +567,51 @@ fn hand_written_update_gradient_matches_candle_autodiff() {
 
 #[test]
 fn path_length_gradient_matches_finite_differences_and_keeps_paths_apart() {
-    use schrl::plan::cpg::{ControlReward, PathLengthReward};
+    use schrl::plan::cpg::PathLengthReward;
     let r = PathLengthReward { weight: 0.05 };
     // Two paths of three 2-D states each: a segment never joins the end of one path
     // to the start of the next.
     let paths = vec![0.0, 0.0, 1.0, 0.5, 2.0, -1.0, 5.0, 5.0, 5.5, 4.0, 3.0, 3.0];
+    assert_gradient_matches_finite_differences(&r, &paths, 2, 2);
+}
+
+/// `reward`'s `add_gradient` against central differences of its summed reward.
+fn assert_gradient_matches_finite_differences(
+    reward: &dyn schrl::plan::cpg::ControlReward,
+    paths: &[f64],
+    steps: usize,
+    dim: usize,
+) {
     let mut g = vec![0.0; paths.len()];
-    r.add_gradient(&paths, 2, 2, &mut g);
-    let total = |p: &[f64]| r.reward(p, 2, 2).iter().sum::<f64>();
+    reward.add_gradient(paths, steps, dim, &mut g);
+    let total = |p: &[f64]| reward.reward(p, steps, dim).iter().sum::<f64>();
     for i in 0..paths.len() {
-        let (mut hi, mut lo) = (paths.clone(), paths.clone());
+        let (mut hi, mut lo) = (paths.to_vec(), paths.to_vec());
         hi[i] += 1e-6;
         lo[i] -= 1e-6;
         let fd = (total(&hi) - total(&lo)) / 2e-6;
         assert!((fd - g[i]).abs() < 1e-6, "entry {i}: finite difference {fd}, gradient {}", g[i]);
     }
+}
+
+#[test]
+fn turn_term_counts_the_inner_turns_and_its_gradient_matches_finite_differences() {
+    use schrl::plan::cpg::{ControlReward, PathLengthReward, TurnReward};
+    let r = TurnReward { weight: 0.03 };
+    // A right angle, then a straight run: π/2 in all (the start's heading is unknown,
+    // the last waypoint has no segment leaving it).
+    let square = [0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 1.0, 2.0];
+    let want = -0.03 * std::f64::consts::FRAC_PI_2;
+    assert!((r.reward(&square, 3, 2)[0] - want).abs() < 1e-12, "{:?}", r.reward(&square, 3, 2));
+    // A U-turn is π; a repeated waypoint turns through nothing.
+    assert!((r.reward(&[0.0, 0.0, 1.0, 0.0, 0.0, 0.0], 2, 2)[0] + 0.03 * std::f64::consts::PI).abs() < 1e-12);
+    assert_eq!(r.reward(&[0.0, 0.0, 1.0, 0.0, 1.0, 0.0], 2, 2)[0], 0.0);
+    // Two 3-D paths of four states: a turn never joins one path to the next.
+    let paths = vec![
+        0.0, 0.0, 0.0, 1.0, 0.5, 0.2, 2.0, -1.0, 0.1, 2.5, 0.3, 0.4, //
+        5.0, 5.0, 1.0, 5.5, 4.0, 1.2, 3.0, 3.0, 0.9, 2.0, 4.0, 1.0,
+    ];
+    assert_gradient_matches_finite_differences(&(PathLengthReward { weight: 0.05 }, r), &paths, 3, 3);
 }
 
 #[test]

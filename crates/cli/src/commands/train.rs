@@ -139,6 +139,10 @@ pub struct TrainArgs {
     /// [default: 0.05].
     #[arg(long)]
     length_weight: Option<f64>,
+    /// Weight per radian of the turn term the planner follows in the joint phase: the
+    /// angles its plan turns through at the waypoints (0: none) [default: 0].
+    #[arg(long)]
+    turn_weight: Option<f64>,
     /// Weight per square metre of the trust region holding the joint phase's paths near
     /// the pre-trained planner's (0: none; gru-ode planner only) [default: 0].
     #[arg(long)]
@@ -240,6 +244,7 @@ impl TrainArgs {
         set(&mut j.off_track_weight, self.off_track_weight);
         set(&mut j.fall_penalty, self.fall_penalty);
         set(&mut j.length_weight, self.length_weight);
+        set(&mut j.turn_weight, self.turn_weight);
         j.freeze_planner = self.freeze_planner;
         j.freeze_controller = self.freeze_controller;
         j.neural_obstacle = self.neural_obstacle(&task, s.seed)?;
@@ -352,6 +357,7 @@ impl TrainArgs {
                 ("--off-track-weight", differs(&self.off_track_weight, &saved.joint.off_track_weight)),
                 ("--fall-penalty", differs(&self.fall_penalty, &saved.joint.fall_penalty)),
                 ("--length-weight", differs(&self.length_weight, &saved.joint.length_weight)),
+                ("--turn-weight", differs(&self.turn_weight, &saved.joint.turn_weight)),
                 ("--anchor-weight", differs(&self.anchor_weight, &saved.joint.anchor_weight)),
                 ("--anchor-on", differs(&self.anchor_on, &saved.joint.anchor_on)),
                 ("--plan-step-limit", differs(&self.plan_step_limit, &saved.joint.plan_step_limit)),

@@ -143,6 +143,107 @@ impl ControlReward for PathLengthReward {
     }
 }
 
+/// `r_l = −weight · Σ_k θ_k`: the angles (radians, in `[0, π]`) the path turns through
+/// at its inner waypoints `k = 1 … steps − 1`, between the segment arriving and the
+/// one leaving. A robot that stops to turn on the spot (the Car) pays for each turn
+/// in time as for a stretch of path: `θ / ω` seconds at its spin rate `ω`, in which it
+/// would have driven `v θ / ω` metres at its top speed `v`
+/// ([`crate::run::joint::default_turn_weight`]). The start's turn is not counted: the
+/// robot's heading there is random and not in the path. A waypoint on a zero-length
+/// segment turns through nothing (no direction to turn from).
+#[derive(Clone, Copy, Debug)]
+pub struct TurnReward {
+    /// Reward per radian turned (negative of).
+    pub weight: f64,
+}
+
+/// The angle between `u` and `v` with `∂θ/∂u` and `∂θ/∂v`, or `None` where a segment
+/// has no length or the angle no gradient (`u`, `v` parallel or opposite, where
+/// `θ = atan2(s, u·v)` with `s = √(|u|²|v|² − (u·v)²)` has a kink).
+fn turn_angle(u: &[f64], v: &[f64]) -> (f64, Option<TurnGradient>) {
+    let dot: f64 = u.iter().zip(v).map(|(a, b)| a * b).sum();
+    let (uu, vv) = (u.iter().map(|a| a * a).sum::<f64>(), v.iter().map(|b| b * b).sum::<f64>());
+    if uu < 1e-18 || vv < 1e-18 {
+        return (0.0, None);
+    }
+    let s = (uu * vv - dot * dot).max(0.0).sqrt();
+    let theta = s.atan2(dot);
+    // ∂θ/∂u = (u·v u/|u|² − v)/s, and symmetrically for v.
+    if s < 1e-12 * (uu * vv).sqrt() {
+        return (theta, None);
+    }
+    let du = u.iter().zip(v).map(|(a, b)| (dot * a / uu - b) / s).collect();
+    let dv = v.iter().zip(u).map(|(b, a)| (dot * b / vv - a) / s).collect();
+    (theta, Some(TurnGradient { du, dv }))
+}
+
+/// `∂θ/∂u` and `∂θ/∂v` of [`turn_angle`].
+struct TurnGradient {
+    du: Vec<f64>,
+    dv: Vec<f64>,
+}
+
+impl TurnReward {
+    /// Calls `at(k, θ_k, gradient)` for each inner waypoint `k` of one path
+    /// (`[steps + 1][dim]`), the gradient with respect to waypoints `k − 1`, `k`, `k + 1`.
+    fn each_turn(path: &[f64], dim: usize, mut at: impl FnMut(usize, f64, Option<[Vec<f64>; 3]>)) {
+        let n = path.len() / dim;
+        for k in 1..n.saturating_sub(1) {
+            let p = |i: usize| &path[i * dim..(i + 1) * dim];
+            let u: Vec<f64> = p(k).iter().zip(p(k - 1)).map(|(a, b)| a - b).collect();
+            let v: Vec<f64> = p(k + 1).iter().zip(p(k)).map(|(a, b)| a - b).collect();
+            let (theta, grad) = turn_angle(&u, &v);
+            // u = p_k − p_{k−1}, v = p_{k+1} − p_k.
+            let grad = grad.map(|TurnGradient { du, dv }| {
+                let before = du.iter().map(|g| -g).collect();
+                let here = du.iter().zip(&dv).map(|(a, b)| a - b).collect();
+                [before, here, dv]
+            });
+            at(k, theta, grad);
+        }
+    }
+}
+
+impl ControlReward for TurnReward {
+    fn reward(&self, paths: &[f64], steps: usize, dim: usize) -> Vec<f64> {
+        paths
+            .chunks((steps + 1) * dim)
+            .map(|p| {
+                let mut turned = 0.0;
+                Self::each_turn(p, dim, |_, theta, _| turned += theta);
+                -self.weight * turned
+            })
+            .collect()
+    }
+
+    /// Pathwise, each turn pulls its waypoint towards the line through its neighbours.
+    fn add_gradient(&self, paths: &[f64], steps: usize, dim: usize, out: &mut [f64]) {
+        let len = (steps + 1) * dim;
+        for (p, o) in paths.chunks(len).zip(out.chunks_mut(len)) {
+            Self::each_turn(p, dim, |k, _, grad| {
+                let Some(grad) = grad else { return };
+                for (j, g) in grad.iter().enumerate() {
+                    let at = (k + j - 1) * dim;
+                    o[at..at + dim].iter_mut().zip(g).for_each(|(t, g)| *t -= self.weight * g);
+                }
+            });
+        }
+    }
+}
+
+/// Two stand-ins at once: their rewards and gradients add.
+impl<A: ControlReward, B: ControlReward> ControlReward for (A, B) {
+    fn reward(&self, paths: &[f64], steps: usize, dim: usize) -> Vec<f64> {
+        let b = self.1.reward(paths, steps, dim);
+        self.0.reward(paths, steps, dim).into_iter().zip(b).map(|(a, b)| a + b).collect()
+    }
+
+    fn add_gradient(&self, paths: &[f64], steps: usize, dim: usize, out: &mut [f64]) {
+        self.0.add_gradient(paths, steps, dim, out);
+        self.1.add_gradient(paths, steps, dim, out);
+    }
+}
+
 /// The fraction of satisfying sampled paths in one batch that makes an attempt
 /// promising ([`CpgConfig::restart_after`]): half.
 pub const PROMISING: f64 = 0.5;

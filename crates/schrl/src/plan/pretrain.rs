@@ -416,7 +416,7 @@ pub(crate) fn pretrain_sized<O: PretrainObserver>(
     }
     let Some(c) = best else { return Ok(None) };
     let mut plan = c.trainer;
-    plan.set_control_reward(Box::new(PathLengthReward { weight: t.config.length_weight }));
+    plan.set_control_reward(Box::new(t.config.path_terms()));
     t.plan = plan;
     if t.config.turn_margin > 0.0 {
         let joint = planned(t, true)?;

@@ -30,7 +30,7 @@ use crate::control::normalize::RewardScaler;
 use crate::control::policy::PolicyCache;
 use crate::control::ppo::{RolloutBuffer, UpdateStats as PpoStats};
 use crate::control::trainer::{RewardTerms, normalize_obs};
-use crate::plan::cpg::{AnchorKind, CpgConfig, PathLengthReward, PlanTrainer};
+use crate::plan::cpg::{AnchorKind, CpgConfig, PathLengthReward, PlanTrainer, TurnReward};
 use crate::run::RunError;
 use crate::run::episode::{Driver, StepReports, drive};
 use crate::run::evaluate::reach_steps;
@@ -77,6 +77,12 @@ pub struct JointConfig {
     /// before it existed used 0.
     #[serde(default)]
     pub length_weight: f64,
+    /// Weight per radian of the turn term the joint phase keeps beside the length one
+    /// ([`TurnReward`], pathwise and in the score function): the angles the plan turns
+    /// through at its waypoints. 0 (this struct's default, and runs saved before it
+    /// existed): none; a run's default is its robot's ([`default_turn_weight`]).
+    #[serde(default, skip_serializing_if = "crate::control::trainer::is_zero")]
+    pub turn_weight: f64,
     /// Weight per square metre of the trust region that holds the joint phase's
     /// sampled paths near the warm-start planner's paths from the same start and
     /// noise ([`PlanTrainer::anchor_here`]; set when pre-training keeps a planner).
@@ -170,6 +176,12 @@ impl JointConfig {
         RewardTerms { fall_penalty: self.fall_penalty, off_track_weight: self.off_track_weight }
     }
 
+    /// The stand-in for `r_l` the joint phase's planner follows beside the executed
+    /// runs' rewards: the path's length and its turns.
+    pub fn path_terms(&self) -> (PathLengthReward, TurnReward) {
+        (PathLengthReward { weight: self.length_weight }, TurnReward { weight: self.turn_weight })
+    }
+
     /// The task the planner plans for: `task` with the goal margin, the obstacle
     /// model, the turn margin and, if `with_safe_margin`, the safe margin. Errors when the neural
     /// obstacle learned another map.
@@ -196,6 +208,7 @@ impl Default for JointConfig {
             control_lr: None,
             control_target_kl: None,
             length_weight: 0.05,
+            turn_weight: 0.0,
             anchor_weight: 0.0,
             anchor_on: AnchorKind::Paths,
             plan_step_limit: 0.0,
@@ -296,6 +309,14 @@ pub fn default_turn_margin(robot: sim::Robot) -> f64 {
     }
 }
 
+/// The joint phase's turn weight ([`JointConfig::turn_weight`]) by default for
+/// `robot`: 0 for every robot (measured without it).
+pub fn default_turn_weight(robot: sim::Robot) -> f64 {
+    match robot {
+        sim::Robot::Point | sim::Robot::Car | sim::Robot::Drone | sim::Robot::Doggo => 0.0,
+    }
+}
+
 /// When the executing robot counts a waypoint reached ([`JointConfig::reach`]) by
 /// default for `robot`: the Drone in the goal ([`Reach::InGoal`]), because its reach
 /// radius (0.6 m, the reference's) is wider than its goals (0.5 m): the task caps it
@@ -374,6 +395,7 @@ impl JointRunSettings {
                 off_track_weight: crate::control::trainer::TrackDefaults::for_robot(task.robot)
                     .joint_off_track_weight,
                 turn_margin: default_turn_margin(task.robot),
+                turn_weight: default_turn_weight(task.robot),
                 reach: default_reach(task.robot),
                 ..JointConfig::default()
             },
@@ -429,6 +451,7 @@ impl JointRunSettings {
         for (name, w) in [
             ("control_weight", j.control_weight),
             ("length_weight", j.length_weight),
+            ("turn_weight", j.turn_weight),
             ("anchor_weight", j.anchor_weight),
         ] {
             if !(w >= 0.0 && w.is_finite()) {
@@ -660,6 +683,7 @@ impl JointTrainer {
         for (key, w) in [
             ("control_weight", config.control_weight),
             ("length_weight", config.length_weight),
+            ("turn_weight", config.turn_weight),
             ("anchor_weight", config.anchor_weight),
         ] {
             if !(w >= 0.0 && w.is_finite()) {
@@ -715,8 +739,7 @@ impl JointTrainer {
             control.learner.config.target_kl = config.control_target_kl;
         }
         let planned = config.planned_task(&task, true)?;
-        let mut plan = PlanTrainer::new(planned, cpg)?
-            .with_control_reward(PathLengthReward { weight: config.length_weight });
+        let mut plan = PlanTrainer::new(planned, cpg)?.with_control_reward(config.path_terms());
         plan.limit_joint_step(config.plan_step_limit)?;
         let envs = (0..config.plan_batch)
             .map(|_| task_env(robot, &task, control.config.observe_track))
