@@ -16,7 +16,7 @@ use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watche
 use sim::Robot;
 
 /// The settings keywords of `schrl.train`: `schrl train`'s flags with `_` for `-`.
-const SETTINGS: [&str; 31] = [
+const SETTINGS: [&str; 32] = [
     "steps",
     "target",
     "controller",
@@ -30,6 +30,7 @@ const SETTINGS: [&str; 31] = [
     "pretrain_candidates",
     "pretrain_horizon_from",
     "pretrain_length_weight",
+    "pretrain_turn_weight",
     "pretrain_guide",
     "freeze_planner",
     "runs_per_start",
@@ -82,6 +83,7 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
         "pretrain_candidates" => set(&mut s.pretrain.candidates, count()?),
         "pretrain_horizon_from" => set(&mut s.pretrain.horizon_from, count()?),
         "pretrain_length_weight" => set(&mut s.pretrain.length_weight, number()?),
+        "pretrain_turn_weight" => set(&mut s.pretrain.turn_weight, number()?),
         "pretrain_guide" => set(&mut s.pretrain.guide, flag()?),
         "freeze_planner" => set(&mut j.freeze_planner, flag()?),
         "runs_per_start" => set(&mut j.runs_per_start, count()?),

@@ -82,6 +82,10 @@ pub struct TrainArgs {
     /// [default: 0.05].
     #[arg(long)]
     pretrain_length_weight: Option<f64>,
+    /// Weight per radian of the turn term pre-training's candidates follow: the angles
+    /// their plans turn through at the waypoints (0: none) [default: 0].
+    #[arg(long)]
+    pretrain_turn_weight: Option<f64>,
     /// Waypoints of the first rung of pre-training's horizon curriculum, climbed by
     /// attempts that keep failing where the task's spec has shorter forms; 0: none
     /// [default: 4].
@@ -263,6 +267,7 @@ impl TrainArgs {
         set(&mut p.updates, self.pretrain_updates);
         set(&mut p.candidates, self.pretrain_candidates);
         set(&mut p.length_weight, self.pretrain_length_weight);
+        set(&mut p.turn_weight, self.pretrain_turn_weight);
         set(&mut p.horizon_from, self.pretrain_horizon_from);
         // On by default; `--pretrain-guide` only restates it.
         p.guide &= !self.no_pretrain_guide;
@@ -338,6 +343,7 @@ impl TrainArgs {
                     "--pretrain-length-weight",
                     differs(&self.pretrain_length_weight, &saved.pretrain.length_weight),
                 ),
+                ("--pretrain-turn-weight", differs(&self.pretrain_turn_weight, &saved.pretrain.turn_weight)),
                 (
                     "--pretrain-horizon-from",
                     differs(&self.pretrain_horizon_from, &saved.pretrain.horizon_from),

@@ -46,7 +46,7 @@ use serde::{Deserialize, Serialize};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::plan::cpg::{CpgConfig, PathLengthReward, PlanTrainer};
+use crate::plan::cpg::{CpgConfig, PathLengthReward, PlanTrainer, TurnReward};
 use crate::plan::gradient_planner::{self, GradientPlan, GradientPlannerConfig, WaypointDraw};
 use crate::run::joint::JointTrainer;
 use crate::task::Task;
@@ -138,6 +138,11 @@ pub struct PretrainConfig {
     /// Weight of the path-length stand-in for `r_l`, per metre (0.05: without it,
     /// Point Seq plans met the spec by detours the controller could not follow).
     pub length_weight: f64,
+    /// Weight per radian of the turn term beside the length one ([`TurnReward`]):
+    /// candidates learn plans that turn less. 0 (the default, and runs saved before it
+    /// existed): none.
+    #[serde(default, skip_serializing_if = "crate::control::trainer::is_zero")]
+    pub turn_weight: f64,
     /// Waypoints of the horizon curriculum's first rung (4; 0: no curriculum; runs
     /// saved before it existed have none). An attempt after [`CURRICULUM_AFTER`]
     /// restarts trains on the task's first `horizon_from` waypoints
@@ -171,6 +176,7 @@ impl Default for PretrainConfig {
             updates: 3000,
             candidates: 3,
             length_weight: 0.05,
+            turn_weight: 0.0,
             horizon_from: 4,
             horizon_step: 2,
             guide: true,
@@ -187,11 +193,10 @@ impl PretrainConfig {
         if self.horizon_step == 0 {
             return Err("pretrain.horizon_step must be at least 1".into());
         }
-        if !(self.length_weight >= 0.0 && self.length_weight.is_finite()) {
-            return Err(format!(
-                "pretrain.length_weight must be a non-negative number, got {}",
-                self.length_weight
-            ));
+        for (name, w) in [("length_weight", self.length_weight), ("turn_weight", self.turn_weight)] {
+            if !(w >= 0.0 && w.is_finite()) {
+                return Err(format!("pretrain.{name} must be a non-negative number, got {w}"));
+            }
         }
         Ok(())
     }
@@ -595,7 +600,8 @@ fn train_candidate(
     cfg: &PretrainConfig,
     update: &mut dyn FnMut(usize, f64),
 ) -> candle_core::Result<()> {
-    plan.set_control_reward(Box::new(PathLengthReward { weight: cfg.length_weight }));
+    let turn = TurnReward { weight: cfg.turn_weight };
+    plan.set_control_reward(Box::new((PathLengthReward { weight: cfg.length_weight }, turn)));
     let rungs: Vec<Task> = match cfg.horizon_from {
         0 => vec![],
         from => (from..task.steps).step_by(cfg.horizon_step).map_while(|n| task.with_horizon(n)).collect(),
@@ -684,6 +690,7 @@ mod tests {
         updates: 2,
         candidates: 1,
         length_weight: 0.05,
+        turn_weight: 0.0,
         horizon_from: 4,
         horizon_step: 2,
         guide: true,
