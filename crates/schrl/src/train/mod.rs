@@ -698,7 +698,7 @@ mod tests {
         let scratch = tempfile::tempdir().unwrap();
         let dir = scratch.path().join("train-bad");
         type Spoil = fn(&mut JointRunSettings);
-        let cases: [(Spoil, &str); 9] = [
+        let cases: [(Spoil, &str); 10] = [
             (|s| s.joint.runs_per_start = 3, "runs_per_start must divide the plan batch (8)"),
             (|s| s.target = Some(1.5), "target must be a fraction in [0, 1], got 1.5"),
             (|s| s.pretrain.candidates = 0, "pretrain_candidates must be at least 1"),
@@ -708,6 +708,7 @@ mod tests {
             (|s| s.joint.fall_penalty = f64::INFINITY, "fall_penalty must be a finite number ≥ 0"),
             (|s| s.joint.turn_margin = -0.5, "turn_margin must be a non-negative number of metres"),
             (|s| s.joint.turn_weight = -0.03, "turn_weight must be a non-negative number, got -0.03"),
+            (|s| s.pretrain.turn_weight = f64::NAN, "pretrain_turn_weight must be a non-negative number"),
         ];
         for (spoil, message) in cases {
             let mut s = settings();
