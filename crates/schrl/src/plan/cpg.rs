@@ -147,8 +147,8 @@ impl ControlReward for PathLengthReward {
 /// at its inner waypoints `k = 1 … steps − 1`, between the segment arriving and the
 /// one leaving. A robot that stops to turn on the spot (the Car) pays for each turn
 /// in time as for a stretch of path: `θ / ω` seconds at its spin rate `ω`, in which it
-/// would have driven `v θ / ω` metres at its top speed `v`
-/// ([`crate::run::joint::default_turn_weight`]). The start's turn is not counted: the
+/// would have driven `v θ / ω` metres at its top speed `v` (so a weight of
+/// `length weight × v / ω`). The start's turn is not counted: the
 /// robot's heading there is random and not in the path. A waypoint on a zero-length
 /// segment turns through nothing (no direction to turn from).
 #[derive(Clone, Copy, Debug)]
@@ -206,6 +206,10 @@ impl TurnReward {
 
 impl ControlReward for TurnReward {
     fn reward(&self, paths: &[f64], steps: usize, dim: usize) -> Vec<f64> {
+        // Off (the default) it costs nothing: no angle is measured.
+        if self.weight == 0.0 {
+            return NoControlReward.reward(paths, steps, dim);
+        }
         paths
             .chunks((steps + 1) * dim)
             .map(|p| {
@@ -218,6 +222,9 @@ impl ControlReward for TurnReward {
 
     /// Pathwise, each turn pulls its waypoint towards the line through its neighbours.
     fn add_gradient(&self, paths: &[f64], steps: usize, dim: usize, out: &mut [f64]) {
+        if self.weight == 0.0 {
+            return;
+        }
         let len = (steps + 1) * dim;
         for (p, o) in paths.chunks(len).zip(out.chunks_mut(len)) {
             Self::each_turn(p, dim, |k, _, grad| {

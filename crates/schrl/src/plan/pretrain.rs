@@ -185,6 +185,11 @@ impl Default for PretrainConfig {
 }
 
 impl PretrainConfig {
+    /// The stand-in for `r_l` the candidates follow: the path's length and its turns.
+    pub fn path_terms(&self) -> (PathLengthReward, TurnReward) {
+        (PathLengthReward { weight: self.length_weight }, TurnReward { weight: self.turn_weight })
+    }
+
     /// Checks the settings, naming the bad one.
     pub fn validate(&self) -> Result<(), String> {
         if self.candidates == 0 {
@@ -600,8 +605,7 @@ fn train_candidate(
     cfg: &PretrainConfig,
     update: &mut dyn FnMut(usize, f64),
 ) -> candle_core::Result<()> {
-    let turn = TurnReward { weight: cfg.turn_weight };
-    plan.set_control_reward(Box::new((PathLengthReward { weight: cfg.length_weight }, turn)));
+    plan.set_control_reward(Box::new(cfg.path_terms()));
     let rungs: Vec<Task> = match cfg.horizon_from {
         0 => vec![],
         from => (from..task.steps).step_by(cfg.horizon_step).map_while(|n| task.with_horizon(n)).collect(),

@@ -79,8 +79,8 @@ pub struct JointConfig {
     pub length_weight: f64,
     /// Weight per radian of the turn term the joint phase keeps beside the length one
     /// ([`TurnReward`], pathwise and in the score function): the angles the plan turns
-    /// through at its waypoints. 0 (this struct's default, and runs saved before it
-    /// existed): none; a run's default is its robot's ([`default_turn_weight`]).
+    /// through at its waypoints. 0 (the default for every robot, and runs saved before
+    /// it existed): none; tried on the Car and not kept (README, *Seq's steps*).
     #[serde(default, skip_serializing_if = "crate::control::trainer::is_zero")]
     pub turn_weight: f64,
     /// Weight per square metre of the trust region that holds the joint phase's
@@ -309,14 +309,6 @@ pub fn default_turn_margin(robot: sim::Robot) -> f64 {
     }
 }
 
-/// The joint phase's turn weight ([`JointConfig::turn_weight`]) by default for
-/// `robot`: 0 for every robot (measured without it).
-pub fn default_turn_weight(robot: sim::Robot) -> f64 {
-    match robot {
-        sim::Robot::Point | sim::Robot::Car | sim::Robot::Drone | sim::Robot::Doggo => 0.0,
-    }
-}
-
 /// When the executing robot counts a waypoint reached ([`JointConfig::reach`]) by
 /// default for `robot`: the Drone in the goal ([`Reach::InGoal`]), because its reach
 /// radius (0.6 m, the reference's) is wider than its goals (0.5 m): the task caps it
@@ -395,7 +387,6 @@ impl JointRunSettings {
                 off_track_weight: crate::control::trainer::TrackDefaults::for_robot(task.robot)
                     .joint_off_track_weight,
                 turn_margin: default_turn_margin(task.robot),
-                turn_weight: default_turn_weight(task.robot),
                 reach: default_reach(task.robot),
                 ..JointConfig::default()
             },
