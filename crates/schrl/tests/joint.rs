@@ -76,28 +76,34 @@ fn reaching_in_goal_waits_until_the_robot_is_inside_the_waypoints_goal() {
     assert_eq!(Reach::default(), Reach::Radius);
 }
 
-/// The Drone counts a waypoint reached in the goal by default: with its reach radius
-/// capped by the task and its goals shrunk by at most a third, a waypoint counted
-/// reached by the radius alone may lie outside its goal. Point and the Car keep the
-/// paper's rule.
+/// The Drone and the Car count a waypoint reached in the goal by default: with their
+/// goals shrunk by at most a third, a waypoint counted reached by the radius alone may
+/// lie outside its goal (the Drone's by up to 0.16 m, the Car's 0.13 m: Car Cover seed
+/// 1's 9 spec failures of 500). Point keeps the paper's rule.
 #[test]
-fn the_drone_reaches_in_the_goal_and_the_others_by_the_radius_by_default() {
+fn the_drone_and_the_car_reach_in_the_goal_and_point_by_the_radius_by_default() {
     use schrl::run::joint::JointRunSettings;
     // The Doggo's settings need MuJoCo (its reach radius); the others' are built here.
-    for (robot, reach) in [("point", Reach::Radius), ("car", Reach::Radius), ("drone", Reach::InGoal)] {
+    for (robot, reach) in [("point", Reach::Radius), ("car", Reach::InGoal), ("drone", Reach::InGoal)] {
         let task = Task::builtin(robot, TaskKind::Seq).unwrap();
         assert_eq!(JointRunSettings::for_task(&task, 0).unwrap().joint.reach, reach, "{robot}");
     }
-    for kind in [TaskKind::Seq, TaskKind::Loop, TaskKind::Signal] {
-        let task = Task::builtin("drone", kind).unwrap();
+    for (robot, kind) in [
+        ("drone", TaskKind::Seq),
+        ("drone", TaskKind::Loop),
+        ("drone", TaskKind::Signal),
+        ("car", TaskKind::Cover),
+        ("car", TaskKind::Seq),
+    ] {
+        let task = Task::builtin(robot, kind).unwrap();
         let s = JointRunSettings::for_task(&task, 0).unwrap();
         let reach = task.waypoint_reach(s.joint.goal_margin);
         let planned = task.with_goal_margin(s.joint.goal_margin);
         for (g, p) in task.goals.iter().zip(&planned.goals) {
             // A waypoint on the planned goal's edge, counted reached `reach` beyond it.
             assert!(
-                p.radius + reach > g.radius + 0.15,
-                "{kind:?} {}: {} + {reach} within {}",
+                p.radius + reach > g.radius + 0.1,
+                "{robot} {kind:?} {}: {} + {reach} within {}",
                 g.name,
                 p.radius,
                 g.radius

@@ -127,7 +127,7 @@ pub struct TrainArgs {
     follow: Option<Follow>,
     /// When the executing robot counts a waypoint reached: radius (within the reach
     /// radius, the paper's) or in-goal (within it and inside every goal that holds
-    /// the planned waypoint) [default: in-goal for the Drone, radius for the others].
+    /// the planned waypoint) [default: in-goal for the Drone and the Car, radius for the others].
     #[arg(long, value_name = "radius|in-goal")]
     reach: Option<Reach>,
     /// Reward the joint phase's controller loses per step per metre it strays from the
