@@ -16,7 +16,7 @@ use schrl::train::{Progress, ResumeChanges, RunSession, Stop, TrainError, Watche
 use sim::Robot;
 
 /// The settings keywords of `schrl.train`: `schrl train`'s flags with `_` for `-`.
-const SETTINGS: [&str; 32] = [
+const SETTINGS: [&str; 33] = [
     "steps",
     "target",
     "controller",
@@ -48,6 +48,7 @@ const SETTINGS: [&str; 32] = [
     "eval_groups",
     "save_every",
     "select_every",
+    "select_rule",
     "controller_tries",
 ];
 
@@ -106,6 +107,7 @@ fn apply(s: &mut JointRunSettings, key: &str, value: &Bound<'_, PyAny>) -> PyRes
         "eval_groups" => set(&mut s.eval_groups, count()?),
         "save_every" => set(&mut s.save_every, count()?),
         "select_every" => set(&mut s.select_every, count()?),
+        "select_rule" => set(&mut s.select_rule, parsed(key, &text()?)?),
         "controller_tries" => set(&mut s.controller_tries, count()?),
         other => {
             return Err(PyTypeError::new_err(format!(

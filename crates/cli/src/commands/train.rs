@@ -9,6 +9,7 @@ use schrl::plan::planner::PlannerKind;
 use schrl::run::RunError;
 use schrl::run::evaluate::{Plans, RunRecord, TaskEval, evaluate_task_with, mean_std};
 use schrl::run::joint::{JointRunSettings, SettingError};
+use schrl::run::select::SelectRule;
 use schrl::store::{self, JsonLines, RunKind};
 use schrl::task::neural_sdf::{NeuralSdf, SdfFitConfig};
 use schrl::task::{Follow, Reach};
@@ -200,6 +201,11 @@ pub struct TrainArgs {
     /// Car, 0 for Point and the Drone].
     #[arg(long, value_name = "STEPS")]
     select_every: Option<usize>,
+    /// Which validated checkpoint is deployed: most-satisfying (the fastest of the
+    /// most satisfying) or one-se (the fastest within one standard error of the most
+    /// satisfying) [default: one-se for the Car, most-satisfying for the others].
+    #[arg(long, value_name = "most-satisfying|one-se")]
+    select_rule: Option<SelectRule>,
 }
 
 impl TrainArgs {
@@ -274,6 +280,7 @@ impl TrainArgs {
         set(&mut s.eval_groups, self.eval_groups);
         set(&mut s.save_every, self.save_every);
         set(&mut s.select_every, self.select_every);
+        set(&mut s.select_rule, self.select_rule);
         s.validate().map_err(flag_error)?;
         Ok(s)
     }
@@ -379,6 +386,7 @@ impl TrainArgs {
                 ),
                 ("--obstacle-sdf", self.obstacle_sdf_differs(saved)?),
                 ("--select-every", differs(&self.select_every, &saved.select_every)),
+                ("--select-rule", differs(&self.select_rule, &saved.select_rule)),
             ],
         )
     }

@@ -279,6 +279,11 @@ pub struct JointRunSettings {
     /// is. Default: [`crate::run::select::default_every`].
     #[serde(default)]
     pub select_every: usize,
+    /// Which validation a selecting run deploys ([`crate::run::select::SelectRule`]):
+    /// the most satisfying (runs saved before it existed) or the fastest within one
+    /// standard error of it. Default: [`crate::run::select::default_rule`].
+    #[serde(default)]
+    pub select_rule: crate::run::select::SelectRule,
 }
 
 /// Joint-training steps of a run by default (chosen on Point).
@@ -371,7 +376,8 @@ impl JointRunSettings {
     /// The default settings of a run of `task` from `seed`: the robot's step budget
     /// ([`default_steps`]), the planner's goal discs shrunk by the robot's reach radius,
     /// [`DEFAULT_SAFE_MARGIN`] more clearance, the robot's turn margin, reach rule,
-    /// off-track weight and validation interval, and each config's own defaults.
+    /// off-track weight, validation interval and selection rule, and each config's own
+    /// defaults.
     pub fn for_task(task: &Task, seed: u64) -> Result<Self, RunError> {
         let goal_margin = sim::make_env(task.robot, task.map.clone())?.reach_radius();
         Ok(Self {
@@ -397,6 +403,7 @@ impl JointRunSettings {
             eval_groups: crate::run::evaluate::EVAL_GROUPS,
             save_every: DEFAULT_SAVE_EVERY,
             select_every: crate::run::select::default_every(task.robot),
+            select_rule: crate::run::select::default_rule(task.robot),
         })
     }
 

@@ -26,7 +26,7 @@ use crate::plan::pretrain::{PretrainObserver, PretrainProgress, PretrainState, p
 use crate::run::RunError;
 use crate::run::evaluate::{EVAL_PER_GROUP, EVAL_SEED, Plans, TaskEval, evaluate_task};
 use crate::run::joint::{JointMetrics, JointRunSettings, JointTrainer, SettingError};
-use crate::run::select::{Selection, Validation};
+use crate::run::select::{SelectRule, Selection, Validation};
 use crate::store::{self, Existing, MetricsLog, RunKind, RunWriter, StoreError};
 
 pub mod controller;
@@ -278,6 +278,7 @@ impl RunSession {
             0 => None,
             every => Some(Selector {
                 every,
+                rule: s.select_rule,
                 selection: self.selection.take().unwrap_or_default(),
                 dir: self.run.dir().join(store::joint::BEST),
                 writer: None,
@@ -365,6 +366,8 @@ fn save(run: &mut RunWriter, trainer: &JointTrainer, selector: &Option<Selector>
 struct Selector {
     /// Environment steps between validations.
     every: usize,
+    /// Which validation is deployed.
+    rule: SelectRule,
     selection: Selection,
     /// `DIR/best`.
     dir: PathBuf,
@@ -387,7 +390,7 @@ impl Selector {
             return Ok(());
         }
         let v = Validation::of(t)?;
-        if self.selection.record(v) {
+        if self.selection.record(v, self.rule) {
             let writer = match self.writer.take() {
                 Some(w) => w,
                 None if self.dir.join(store::MANIFEST).exists() => {
