@@ -47,11 +47,14 @@ def test_evaluation_after_training_is_schrl_evaluate(general, tmp_path):
 
 
 def test_a_selecting_run_deploys_its_best_validated_checkpoint(general, tmp_path):
-    result = train(tmp_path / "run", general, eval_groups=1, select_every=max(1, TINY["steps"] // 2))
+    result = train(
+        tmp_path / "run", general, eval_groups=1, select_every=max(1, TINY["steps"] // 2), select_rule="one-se"
+    )
     chosen = result["selected"]
     assert chosen is not None and 0 <= chosen["iteration"] <= result["iterations"]
     assert 0 <= chosen["satisfaction"] <= 1
     assert (tmp_path / "run" / "best" / "manifest.json").exists()
+    assert json.loads((tmp_path / "run" / "manifest.json").read_text())["settings"]["select_rule"] == "one-se"
     # What the run evaluated is what schrl.evaluate loads: the deployed checkpoint.
     assert result["evaluation"] == schrl.evaluate(str(tmp_path / "run"), groups=1)
     assert train(tmp_path / "plain", general)["selected"] is None
@@ -87,6 +90,7 @@ def test_existing_runs_are_refused_resumed_or_replaced(general, tmp_path):
     ({"anchor_weight": 1.0, "planner": "mlp"}, "anchor_weight must be 0 with the mlp planner"),
     ({"plan_step_limit": -0.1}, "plan_step_limit must be a non-negative number of metres"),
     ({"plan_step_limit": 0.05, "planner": "mlp"}, "plan_step_limit must be 0 with the mlp planner"),
+    ({"select_rule": "fastest"}, "select_rule: 'fastest' is not most-satisfying or one-se"),
 ])
 def test_bad_settings_are_named(tmp_path, kw, message):
     with pytest.raises(ValueError, match=message):
