@@ -113,6 +113,7 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
     let bars = BarChart {
         groups: vec!["seq".into(), "loop".into()],
         series: vec!["(a) SCHRL".into(), "(d) frozen planner".into()],
+        x_label: "task".into(),
         panels: vec![BarPanel {
             y_label: "satisfaction (normalised)".into(),
             values: vec![vec![1.0, 0.9], vec![0.95, f64::NAN]],
@@ -123,7 +124,7 @@ fn charts_and_scenes_carry_axis_titles_tick_labels_and_legends() {
     let svg = scratch.path().join("bars.svg");
     save_bars(&bars, &svg, false).unwrap();
     let text = std::fs::read_to_string(&svg).unwrap();
-    for want in ["seq", "loop", "(a) SCHRL", "(d) frozen planner", "satisfaction (normalised)"] {
+    for want in ["seq", "loop", "task", "(a) SCHRL", "(d) frozen planner", "satisfaction (normalised)"] {
         assert!(text.contains(want), "{want} missing from the bars' SVG");
     }
     save_bars(&bars, &scratch.path().join("bars.png"), false).unwrap();

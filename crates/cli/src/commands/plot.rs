@@ -169,6 +169,7 @@ pub fn save_bar_chart(rows: &[BarRow], out: &Path, force: bool) -> Result<()> {
     let chart = BarChart {
         groups: tasks.clone(),
         series: variants.clone(),
+        x_label: "task".into(),
         panels: vec![
             BarPanel {
                 y_label: "satisfaction (normalised)".into(),

@@ -180,6 +180,8 @@ pub struct BarChart {
     pub groups: Vec<String>,
     /// Series names, in the legend.
     pub series: Vec<String>,
+    /// Title of the x axis, under the group names (empty: none).
+    pub x_label: String,
     /// The panels (each its own measure).
     pub panels: Vec<BarPanel>,
 }
@@ -227,11 +229,12 @@ where
             .margin_left(12)
             .margin_right(20)
             .margin_top(8)
-            .x_label_area_size(30)
+            // Room for the group names, and the axis title under them.
+            .x_label_area_size(if bars.x_label.is_empty() { 30 } else { 50 })
             .y_label_area_size(64)
             .build_cartesian_2d(0.0..n_groups as f64, y0..y1)
             .map_err(err)?;
-        axes(&mut chart, "", &panel.y_label).disable_x_mesh().x_labels(0).draw().map_err(err)?;
+        axes(&mut chart, &bars.x_label, &panel.y_label).disable_x_mesh().x_labels(0).draw().map_err(err)?;
         for (s, values) in panel.values.iter().enumerate() {
             let color = PALETTE[s % PALETTE.len()];
             for (g, v) in values.iter().enumerate().filter(|(_, v)| v.is_finite()) {
